@@ -1,0 +1,91 @@
+"""lubjax: soft elastohydrodynamic lubrication of a sphere on an elastic half-space, in JAX.
+
+The non-iterative scheme of Liu, Dong, Jagota & Hui, Soft Matter 18 (2022) 1219 (one linear
+solve per time step), on a graded mesh with a second-order linearly implicit step.
+
+Importing lubjax enables float64 in JAX (``jax_enable_x64``): the solver refuses to run without it.
+"""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+from ._analytic import (  # noqa: E402
+    hertz_displacement,
+    hertz_force,
+    hertz_pressure,
+    rigid_squeeze_force,
+    rigid_squeeze_pressure,
+)
+from ._indenter import RampHold, SampledTravel  # noqa: E402
+from ._influence import force_weights, influence_matrix, kernel  # noqa: E402
+from ._mesh import Mesh, graded_mesh, uniform_mesh  # noqa: E402
+from ._solve import (  # noqa: E402
+    Plan,
+    Result,
+    Settings,
+    SolverError,
+    force_curve,
+    make_plan,
+    relax,
+)
+from ._stepper import (  # noqa: E402
+    Discretisation,
+    State,
+    StepCoefficients,
+    StepOutput,
+    bdf_coefficients,
+    discretise,
+    displacement,
+    film_thickness,
+    initial_state,
+    rollout,
+    step,
+)
+from ._timegrid import time_grid  # noqa: E402
+from ._units import (  # noqa: E402
+    RelaxationTest,
+    contact_modulus,
+    plane_strain_modulus,
+    reduced_radius,
+)
+
+__all__ = [
+    "Discretisation",
+    "Mesh",
+    "Plan",
+    "RampHold",
+    "RelaxationTest",
+    "Result",
+    "SampledTravel",
+    "Settings",
+    "SolverError",
+    "State",
+    "StepCoefficients",
+    "StepOutput",
+    "bdf_coefficients",
+    "contact_modulus",
+    "discretise",
+    "displacement",
+    "film_thickness",
+    "force_curve",
+    "force_weights",
+    "graded_mesh",
+    "hertz_displacement",
+    "hertz_force",
+    "hertz_pressure",
+    "influence_matrix",
+    "initial_state",
+    "kernel",
+    "make_plan",
+    "plane_strain_modulus",
+    "reduced_radius",
+    "relax",
+    "rigid_squeeze_force",
+    "rigid_squeeze_pressure",
+    "rollout",
+    "step",
+    "time_grid",
+    "uniform_mesh",
+]
+__version__ = "0.1.0"
