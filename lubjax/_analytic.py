@@ -30,7 +30,8 @@ def hertz_displacement(r, z0):
     a = np.sqrt(max(a2, 0.0))
     inside = -(a2 - 0.5 * r**2)
     rs = np.maximum(r, a if a > 0 else 1.0)
-    outside = -((2 * a2 - rs**2) * np.arcsin(np.clip(a / rs, 0, 1)) + a * np.sqrt(rs**2 - a2)) / np.pi
+    asin = np.arcsin(np.clip(a / rs, 0, 1))
+    outside = -((2 * a2 - rs**2) * asin + a * np.sqrt(rs**2 - a2)) / np.pi
     return np.where(r <= a, inside, outside)
 
 

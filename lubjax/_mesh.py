@@ -55,9 +55,9 @@ def uniform_mesh(dr: float, length: float) -> Mesh:
 
 
 def graded_mesh(
-    dr: float = 0.01, r_fine: float = 1.6, length: float = 100.0, growth: float = 1.06
+    dr: float = 0.02, r_fine: float = 1.6, length: float = 100.0, growth: float = 1.04
 ) -> Mesh:
-    """Uniform spacing ``dr`` on [0, r_fine], then spacing growing by ``growth`` per cell to ``length``.
+    """Uniform spacing ``dr`` on [0, r_fine], then cells growing by ``growth`` up to ``length``.
 
     Args:
         dr: spacing in the fine zone, which must cover the Hertz contact radius √(1 - z̄0) ≤ 1 and

@@ -169,7 +169,8 @@ class Result:
             out.append("the solution contains NaN or inf")
         if not self.film_positive:
             i = int(np.nanargmin(self.film_min))
-            out.append(f"the film went negative (h̄_min = {self.film_min[i]:.3g} at t̄ = {self.t[i]:.4g})")
+            h, t = self.film_min[i], self.t[i]
+            out.append(f"the film went negative (h̄_min = {h:.3g} at t̄ = {t:.4g})")
         return out
 
 

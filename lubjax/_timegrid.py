@@ -49,7 +49,7 @@ def time_grid(
     last_break = inner[-1] if inner else t_start
     edges = [t_start, *inner, t_end]
     nodes = [t_start]
-    for a, b in zip(edges[:-1], edges[1:]):
+    for b in edges[1:]:
         cap = dt if b <= last_break else (hold_dt_max or math.inf)
         step = dt_min
         while nodes[-1] < b:

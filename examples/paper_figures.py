@@ -1,0 +1,123 @@
+"""Regenerate the analogues of the paper's Figs 3-6 as PNGs.
+
+    python examples/paper_figures.py [--out examples/out]
+
+Fig 3: pressure at t̄ = 5 for β = 100, z̄0 = 0.5 under mesh, time-step and domain refinement
+(including the paper's L̄ = 4 truncation). Figs 4-6: pressure, film thickness and substrate
+displacement at several times for β = 100 and z̄0 = 0.5, 1, 2 (solid: loading, dashed: hold),
+with the short-time rigid-squeeze (eq 12b) and long-time Hertz (eq 14) asymptotes in Fig 4a.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+import lubjax  # noqa: E402
+
+TIMES = (0.2, 0.4, 0.6, 0.8, 1.0, 1.5, 2.0, 3.0, 5.0)
+
+
+def _profiles(beta, z0):
+    return lubjax.relax(beta, z0, t_end=5.0, profile_times=TIMES)
+
+
+def figs_4_to_6(out):
+    results = {}
+    for z0 in (0.5, 1.0, 2.0):
+        print(f"  β = 100, z̄0 = {z0}", file=sys.stderr)
+        results[z0] = _profiles(100.0, z0)
+    specs = [
+        ("fig4_pressure.png", "pressure", "p̄"),
+        ("fig5_film.png", "film", "h̄"),
+        ("fig6_displacement.png", "displacement", "w̄"),
+    ]
+    for name, field, label in specs:
+        fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
+        for ax, (z0, res) in zip(axes, results.items()):
+            sel = res.r <= 2.0
+            colors = plt.cm.viridis(np.linspace(0, 0.9, len(TIMES)))
+            for c, t, prof in zip(colors, res.profile_times, getattr(res, field)):
+                ls = "-" if t <= 1.0 else "--"
+                ax.plot(res.r[sel], prof[sel], ls=ls, color=c, label=f"t̄ = {t:g}")
+            if field == "pressure" and z0 == 0.5:
+                ax.plot(res.r[sel], lubjax.hertz_pressure(res.r[sel], z0), "ko", ms=3,
+                        markevery=4, label="Hertz (eq 14)")
+                for t in (0.2, 0.4):
+                    ax.plot(res.r[sel], lubjax.rigid_squeeze_pressure(res.r[sel], z0 - t, -1, 100),
+                            "rx", ms=3, markevery=4,
+                            label="rigid squeeze (eq 12b)" if t == 0.2 else None)
+            if field == "film":
+                ax.set_ylim(0, 2.2 if z0 < 2 else 3.2)
+            ax.set_title(f"β = 100, z̄0 = {z0:g}")
+            ax.set_xlabel("r̄")
+            ax.set_ylabel(label)
+        axes[0].legend(fontsize=7, ncol=2)
+        fig.tight_layout()
+        fig.savefig(os.path.join(out, name), dpi=110)
+        plt.close(fig)
+
+
+def fig3_refinement(out):
+    base = lubjax.Settings()
+    variants = [
+        ("default (dr=0.02, dt=5e-3, L=100)", base),
+        ("dr = 0.01", lubjax.Settings(dr=0.01)),
+        ("dr = 0.04", lubjax.Settings(dr=0.04)),
+        ("dt = 2e-3", lubjax.Settings(dt=2e-3)),
+        ("dt = 2e-2", lubjax.Settings(dt=2e-2)),
+        ("L = 25", lubjax.Settings(length=25.0)),
+        ("paper domain L = 4, uniform dr=0.01", None),
+    ]
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
+    for label, settings in variants:
+        print(f"  refinement: {label}", file=sys.stderr)
+        if settings is None:
+            mesh = lubjax.uniform_mesh(0.01, 4.0)
+            t = lubjax.time_grid(5.0)
+            disc = lubjax.discretise(mesh)
+            o = lubjax.rollout(disc, 100.0, 0.5, lubjax.RampHold().travel(t),
+                               lubjax.bdf_coefficients(t), save_profiles=True)
+            r, p, tt, force = mesh.r, np.asarray(o.pressure[-1]), t, np.asarray(o.force)
+        else:
+            res = lubjax.relax(100.0, 0.5, t_end=5.0, settings=settings, profile_times=[5.0])
+            r, p, tt, force = res.r, res.pressure[0], res.t, res.force
+        sel = r <= 1.5
+        ax[0].plot(r[sel], p[sel], label=label)
+        ax[1].plot(tt, force, label=label)
+    ax[0].plot(r[sel], lubjax.hertz_pressure(r[sel], 0.5), "k:", label="Hertz (eq 14)")
+    ax[0].set_xlabel("r̄")
+    ax[0].set_ylabel("p̄ at t̄ = 5")
+    ax[0].set_title("Fig 3 analogue: β = 100, z̄0 = 0.5")
+    ax[0].legend(fontsize=7)
+    ax[1].set_xlabel("t̄")
+    ax[1].set_ylabel("F̄")
+    ax[1].axhline(lubjax.hertz_force(0.5), color="k", ls=":")
+    ax[1].set_title("force under the same refinements")
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "fig3_refinement.png"), dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--out", default="examples/out")
+    args = ap.parse_args(argv)
+    os.makedirs(args.out, exist_ok=True)
+    print("Figs 4-6", file=sys.stderr)
+    figs_4_to_6(args.out)
+    print("Fig 3", file=sys.stderr)
+    fig3_refinement(args.out)
+    print(f"wrote {args.out}/fig3_refinement.png, fig4_pressure.png, fig5_film.png, "
+          "fig6_displacement.png")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,60 @@
+"""Figures for a single run (matplotlib, Agg backend; imported only when a plot is asked for)."""
+
+from __future__ import annotations
+
+import os
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ._analytic import hertz_force, rigid_squeeze_force  # noqa: E402
+
+
+def plot_result(res, path: str, test=None) -> None:
+    """Force and minimum film against time, and the pressure / film profiles."""
+    fig, ax = plt.subplots(1, 3, figsize=(14, 4))
+    t = res.t
+    ax[0].plot(t, res.force, "k-", label="lubjax")
+    load = (t > 0.02) & (t < 1) & (res.z0 - t > 0.05)
+    ax[0].plot(
+        t[load], rigid_squeeze_force(res.z0 - t[load], -1.0, res.beta), "b:",
+        label="rigid squeeze (eq 12b)",
+    )
+    if res.z0 < 1:
+        ax[0].axhline(hertz_force(res.z0), color="r", ls="--", label="Hertz (eq 16)")
+    ax[0].set_ylim(0, 1.15 * np.nanmax(res.force))
+    ax[0].set_xlabel("t̄")
+    ax[0].set_ylabel("F̄")
+    if t[-1] > 20:
+        ax[0].set_xscale("symlog", linthresh=1.0)
+    ax[0].legend(fontsize=8)
+    ax[0].set_title(f"β = {res.beta:.3g}, z̄0 = {res.z0:.3g}")
+    ax[1].semilogy(t, np.clip(res.film_min, 1e-12, None), "k-", label="min h̄")
+    ax[1].semilogy(t, np.clip(res.film_center, 1e-12, None), "g--", label="h̄(0)")
+    ax[1].set_xlabel("t̄")
+    ax[1].set_ylabel("film thickness")
+    if t[-1] > 20:
+        ax[1].set_xscale("symlog", linthresh=1.0)
+    ax[1].legend(fontsize=8)
+    rmax = 2.5
+    sel = res.r <= rmax
+    for tp, p, h in zip(res.profile_times, res.pressure, res.film):
+        line = ax[2].plot(res.r[sel], p[sel], label=f"p̄, t̄={tp:g}")[0]
+        ax[2].plot(res.r[sel], h[sel], ls=":", color=line.get_color())
+    ax[2].set_xlabel("r̄")
+    ax[2].set_ylabel("p̄ (solid), h̄ (dotted)")
+    ax[2].legend(fontsize=7)
+    if test is not None:
+        fig.suptitle(
+            f"E* = {test.E_star:.3g} Pa, η = {test.viscosity:.3g} Pa s, R = {test.radius:.3g} m, "
+            f"v0 = {test.speed:.3g} m/s, d_c = {test.indent:.3g} m, z0 = {test.gap:.3g} m  "
+            f"(t_c = {test.time_scale:.3g} s, F scale = {test.force_scale:.3g} N)",
+            fontsize=9,
+        )
+    fig.tight_layout()
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

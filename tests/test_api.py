@@ -1,0 +1,181 @@
+"""Inputs, outputs, checks, units and the differentiable / vmappable core."""
+
+import json
+import math
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import lubjax
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        (dict(E_star=0.0), "E_star"),
+        (dict(E_star=float("nan")), "E_star"),
+        (dict(radius=-1e-3), "radius"),
+        (dict(viscosity=0.0), "viscosity"),
+        (dict(speed=-1.0), "speed"),
+        (dict(indent=0.0), "indent"),
+        (dict(gap=float("inf")), "gap"),
+    ],
+)
+def test_invalid_si_inputs_name_the_parameter(kwargs, name):
+    base = dict(E_star=3.92e6, radius=2e-3, viscosity=100.0, speed=1e-4, indent=140e-6, gap=140e-6)
+    base.update(kwargs)
+    with pytest.raises(ValueError, match=name):
+        lubjax.RelaxationTest(**base)
+
+
+@pytest.mark.parametrize("nu", [-1.0, 0.51, float("nan")])
+def test_poisson_ratio_range(nu):
+    with pytest.raises(ValueError, match=r"\(-1, 0.5\]"):
+        lubjax.plane_strain_modulus(2.94e6, nu)
+
+
+def test_dimensionless_groups_of_the_paper_experiment():
+    """Section 3.2 / MODEL.md: E = 2.94 MPa, ν = 0.5, η = 100 Pa s, R = 2 mm, v0 = 0.1 mm/s,
+    z0 = 140 μm, d_c = 140 μm gives z̄0 = 1 and β ≈ 54."""
+    test = lubjax.RelaxationTest.from_E(
+        2.94e6, 0.5, radius=2e-3, viscosity=100.0, speed=1e-4, indent=140e-6, gap=140e-6
+    )
+    assert test.E_star == pytest.approx(3.92e6)
+    assert test.z0_bar == pytest.approx(1.0)
+    assert test.beta == pytest.approx(54, abs=0.5)
+    assert test.time_scale == pytest.approx(1.4)
+    # Hertz (eq 16) in SI equals the scaled dimensionless force.
+    dc, z0 = 154e-6, 140e-6
+    t2 = lubjax.RelaxationTest(3.92e6, 2e-3, 100.0, 1e-4, dc, z0)
+    f_si = 4 / 3 * 3.92e6 * math.sqrt(2e-3) * (dc - z0) ** 1.5
+    assert t2.force_scale * lubjax.hertz_force(t2.z0_bar) == pytest.approx(f_si, rel=1e-12)
+
+
+def test_two_spheres_reduce_by_eq_24():
+    assert lubjax.reduced_radius(2e-3, 2e-3) == pytest.approx(1e-3)
+    assert lubjax.contact_modulus(1e6, 0.5, 1e6, 0.5) == pytest.approx(1e6 / 0.75 / 2)
+    assert lubjax.contact_modulus(1e6, 0.5) == pytest.approx(1e6 / 0.75)
+
+
+@pytest.mark.parametrize(
+    "args, match",
+    [((0.0, 0.5), "beta"), ((100.0, -1.0), "z0"), ((float("nan"), 0.5), "beta")],
+)
+def test_relax_rejects_bad_parameters(args, match):
+    with pytest.raises(ValueError, match=match):
+        lubjax.relax(*args)
+
+
+def test_relax_rejects_bad_end_time():
+    with pytest.raises(ValueError, match="t_end"):
+        lubjax.relax(100.0, 0.5, t_end=0.0)
+
+
+def test_refuses_float32():
+    jax.config.update("jax_enable_x64", False)
+    try:
+        with pytest.raises(RuntimeError, match="float64"):
+            lubjax.relax(100.0, 0.5, t_end=0.1)
+    finally:
+        jax.config.update("jax_enable_x64", True)
+
+
+def test_negative_film_is_raised_or_flagged():
+    """A deliberately coarse, stiff run (25 % cells, Δt̄ = 0.5, backward Euler, β = 10⁶): the film
+    goes negative even after the step safeguard's 64 substeps, and that must not pass quietly."""
+    bad = lubjax.Settings(dr=0.25, r_fine=1.0, length=10.0, mesh_growth=1.5, dt=0.5,
+                          dt_min=0.5, time_growth=1.5, order=1)
+    res = lubjax.relax(1e6, 0.05, t_end=3.0, settings=bad, check="flag")
+    assert not res.film_positive and not res.ok
+    assert "negative" in res.problems()[0]
+    with pytest.raises(lubjax.SolverError, match="film went negative"):
+        lubjax.relax(1e6, 0.05, t_end=3.0, settings=bad)
+    with pytest.warns(RuntimeWarning, match="negative"):
+        lubjax.relax(1e6, 0.05, t_end=3.0, settings=bad, check="warn")
+
+
+def test_nan_is_flagged():
+    res = lubjax.relax(100.0, 0.5, t_end=0.2, check="flag")
+    assert res.ok
+    plan = lubjax.make_plan(0.2)
+    out = lubjax.rollout(plan.disc, jnp.nan, 0.5, plan.travel, plan.coeffs)
+    assert not np.all(np.isfinite(np.asarray(out.force)))
+
+
+def test_sampled_history_matches_ideal_ramp():
+    """One code path: a finely sampled ramp-and-hold gives the ideal ramp's force."""
+    t = np.linspace(0.0, 3.0, 3001)
+    sampled = lubjax.SampledTravel(t, np.clip(t, 0, 1))
+    assert sampled.breakpoints == pytest.approx((0.0, 1.0), abs=2e-3)
+    a = lubjax.relax(100.0, 1.0, t_end=3.0)
+    b = lubjax.relax(100.0, 1.0, t_end=3.0, history=sampled)
+    fa = np.interp(b.t, a.t, a.force)
+    assert np.max(np.abs(fa - b.force)) < 2e-3 * a.force.max()
+
+
+def test_smoothed_start_eq_23():
+    ramp = lubjax.RampHold(t_accel=0.1)
+    t = np.array([-0.1, -0.05, 0.0, 0.5, 1.0, 2.0])
+    d = np.asarray(ramp.travel(t))
+    # z̄ = z̄0 - (t + t²/(2 t1)) for -t1 ≤ t ≤ 0 (eq 23): at rest at t = -t1, unit speed at 0.
+    assert d == pytest.approx([-0.05, -0.0375, 0.0, 0.5, 1.0, 1.0], abs=1e-15)
+    res = lubjax.relax(100.0, 0.5, t_end=2.0, history=ramp)
+    assert res.t[0] == pytest.approx(-0.1) and res.ok
+
+
+def test_vmap_and_forward_gradient_in_beta_and_z0():
+    plan = lubjax.make_plan(1.5, settings=lubjax.Settings(dr=0.05, dt=0.02))
+    f = jax.jit(lambda b, z: lubjax.force_curve(plan, b, z))
+    betas = jnp.array([50.0, 200.0])
+    batched = jax.vmap(f, in_axes=(0, None))(betas, 0.8)
+    for k, b in enumerate(betas):
+        # Batched and single LU solves round differently; the systems' condition numbers
+        # (~1e7) amplify that to ~1e-9 relative.
+        assert np.allclose(batched[k], f(b, 0.8), rtol=1e-8, atol=1e-14)
+    jac = jax.jit(jax.jacfwd(lambda p: lubjax.force_curve(plan, p[0], p[1])))
+    x = jnp.array([100.0, 0.8])
+    J = np.asarray(jac(x))
+    # The force carries roundoff ~1e-9 relative (condition number ~1e7 times eps), so the step
+    # that balances truncation (h²) against roundoff (1e-9/h) is ~1e-4 relative, not √eps.
+    for k in range(2):
+        h = 1e-4 * abs(float(x[k]))
+        e = np.zeros(2)
+        e[k] = h
+        fd = (np.asarray(f(*(x + e))) - np.asarray(f(*(x - e)))) / (2 * h)
+        scale = np.max(np.abs(fd))
+        assert np.max(np.abs(J[:, k] - fd)) < 1e-5 * scale, k
+
+
+def test_cli_dimensionless_and_si(tmp_path):
+    out = tmp_path / "run.json"
+    png = tmp_path / "run.png"
+    cmd = [sys.executable, "-m", "lubjax", "relax", "--beta", "100", "--z0", "0.5",
+           "--t-end", "2", "--out", str(out), "--plot", str(png)]
+    subprocess.run(cmd, check=True, capture_output=True)
+    data = json.loads(out.read_text())
+    for key in ["t", "force", "h_min", "beta", "z0", "run_s", "compile_s"]:
+        assert key in data
+    assert png.stat().st_size > 10_000
+    out2 = tmp_path / "si.json"
+    cmd = [sys.executable, "-m", "lubjax", "relax", "--E-star", "3.92e6", "--viscosity", "100",
+           "--radius", "2e-3", "--speed", "1e-4", "--indent", "140e-6", "--gap", "140e-6",
+           "--t-end", "3", "--out", str(out2)]
+    subprocess.run(cmd, check=True, capture_output=True)
+    si = json.loads(out2.read_text())
+    assert si["beta"] == pytest.approx(53.9, abs=0.1)
+    assert si["t_s"][-1] == pytest.approx(3.0)
+    force, force_n = np.array(si["force"]), np.array(si["force_N"])
+    assert np.allclose(force_n, force * si["scales"]["force_N"], rtol=1e-12, atol=0)
+    assert force_n.max() > 0
+
+
+def test_cli_bad_input_is_a_clear_error():
+    cmd = [sys.executable, "-m", "lubjax", "relax", "--E-star", "-1", "--viscosity", "100",
+           "--radius", "2e-3", "--speed", "1e-4", "--indent", "140e-6", "--gap", "140e-6"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    assert proc.returncode != 0
+    assert "E_star" in proc.stderr
