@@ -42,6 +42,7 @@ from ._stepper import (  # noqa: E402
     rollout,
     step,
 )
+from ._sweep import SweepResult, sweep  # noqa: E402
 from ._timegrid import time_grid  # noqa: E402
 from ._units import (  # noqa: E402
     RelaxationTest,
@@ -85,6 +86,8 @@ __all__ = [
     "rigid_squeeze_pressure",
     "rollout",
     "step",
+    "sweep",
+    "SweepResult",
     "time_grid",
     "uniform_mesh",
 ]

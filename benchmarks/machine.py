@@ -1,0 +1,36 @@
+"""Machine description for benchmark outputs: CPU model, core count, load, threads used."""
+
+from __future__ import annotations
+
+import os
+import platform
+
+
+def cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def describe() -> dict:
+    try:
+        load = os.getloadavg()[0]
+    except OSError:
+        load = float("nan")
+    return dict(
+        cpu=cpu_model(),
+        cores=len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+        threads=os.environ.get("OPENBLAS_NUM_THREADS", "?"),
+        load1=round(load, 2),
+    )
+
+
+def label(info: dict | None = None) -> str:
+    info = info or describe()
+    return (f"{info['cpu']}, {info['cores']} cores, {info['threads']} thread(s) used, "
+            f"load avg {info['load1']}")

@@ -1,0 +1,81 @@
+"""Throughput of ``lubjax.sweep`` (cases per second) against batch size, compile time apart.
+
+    python benchmarks/sweep_throughput.py [--sizes 1 2 4 8 16 32] [--t-end 5]
+
+The baseline is the same cases run one at a time through ``lubjax.relax`` (compiled once) in the
+same process, so the speed-up is a ratio measured in one run. Writes
+benchmarks/out/sweep_throughput.{csv,png} with the machine and JAX devices named.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import sys
+import time
+
+import jax
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+import lubjax  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from benchmarks.machine import cpu_model  # noqa: E402
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--sizes", type=int, nargs="+", default=[1, 2, 4, 8, 16, 32, 64])
+    ap.add_argument("--t-end", type=float, default=5.0)
+    ap.add_argument("--out", default="benchmarks/out/sweep_throughput")
+    args = ap.parse_args(argv)
+    rng = np.random.default_rng(0)
+    devices = jax.devices()
+    machine = (f"{cpu_model()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; "
+               f"JAX {jax.__version__} on {len(devices)}× {devices[0].platform}")
+    print(machine, file=sys.stderr)
+    # Baseline: one case at a time through relax (after its compilation).
+    lubjax.relax(100.0, 0.5, args.t_end)
+    n_single = 4
+    start = time.perf_counter()
+    for _ in range(n_single):
+        lubjax.relax(10 ** rng.uniform(0, 3), rng.uniform(0.5, 2), args.t_end)
+    single_rate = n_single / (time.perf_counter() - start)
+    print(f"one at a time: {single_rate:.2f} cases/s", file=sys.stderr)
+    rows = []
+    for size in args.sizes:
+        beta = 10 ** rng.uniform(0, 3, size)
+        z0 = rng.uniform(0.5, 2.0, size)
+        res = lubjax.sweep(beta, z0, args.t_end)
+        rate = size / res.run_s
+        rows.append(dict(batch=size, cases_per_s=rate, run_s=res.run_s, compile_s=res.compile_s,
+                         speedup_vs_single=rate / single_rate, all_ok=bool(res.ok.all()),
+                         devices=res.devices, machine=machine))
+        print(f"batch {size:4d}: {rate:8.2f} cases/s  (run {res.run_s:.2f} s, compile "
+              f"{res.compile_s:.1f} s, {rate / single_rate:.2f}× one-at-a-time)",
+              file=sys.stderr, flush=True)
+    os.makedirs(os.path.dirname(args.out), exist_ok=True)
+    with open(args.out + ".csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    fig, ax = plt.subplots(figsize=(6, 4))
+    sizes = [r["batch"] for r in rows]
+    ax.loglog(sizes, [r["cases_per_s"] for r in rows], "o-", label="lubjax.sweep (vmap)")
+    ax.axhline(single_rate, color="k", ls="--", label="lubjax.relax one at a time")
+    ax.set_xlabel("batch size")
+    ax.set_ylabel(f"cases per second (t̄ ∈ [0, {args.t_end:g}], run time only)")
+    ax.set_title(machine, fontsize=7)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(args.out + ".png", dpi=110)
+    print(f"wrote {args.out}.csv and .png")
+
+
+if __name__ == "__main__":
+    main()

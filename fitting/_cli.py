@@ -1,0 +1,231 @@
+"""``lubjax-fit TRACE.csv [more.csv ...] --out fit.json --plot fit.png``: fit E*, η, z0.
+
+Prints one summary line per trace to stdout, a progress line to stderr while it works, writes
+the JSON (one object for one trace, a list for several), optionally a CSV table and the plot(s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import sys
+import time
+
+from ._fit import FitResult, fit_traces, result_to_dict
+from ._io import read_trace
+
+
+def _fmt(value, err, unit, scale=1.0):
+    return f"{value / scale:.4g} ± {err / scale:.2g} {unit}"
+
+
+def summary_line(res: FitResult) -> str:
+    status = "converged" if res.converged else "NOT CONVERGED"
+    if not res.identifiable:
+        status += ", NOT IDENTIFIABLE"
+    return (
+        f"{os.path.basename(res.name) or 'trace'}: "
+        f"E* = {_fmt(res.E_star, res.stderr['E_star'], 'MPa', 1e6)}, "
+        f"eta = {_fmt(res.viscosity, res.stderr['viscosity'], 'Pa s')}, "
+        f"z0 = {_fmt(res.z0, res.stderr['z0'], 'um', 1e-6)}; beta = {res.beta:.4g}, "
+        f"z0/dc = {res.z0_over_dc:.4g}, rms residual = {res.rms_residual:.3g} N; "
+        f"{status} ({res.n_iterations} iterations, {res.wall_s:.1f} s)"
+    )
+
+
+def plot_fit(res: FitResult, path: str) -> None:
+    """Data and model, residuals, and the fitted values with their 1-σ errors, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(9, 7.5))
+    gs = fig.add_gridspec(3, 1, height_ratios=[3, 1.3, 1.1], hspace=0.35)
+    ax = fig.add_subplot(gs[0])
+    ax.plot(res.time, res.force * 1e3, ".", ms=2.5, color="0.55", label="data")
+    ax.plot(res.time, res.model * 1e3, "-", color="C3", lw=1.5, label="lubjax model (fit)")
+    ax.set_ylabel("force [mN]")
+    ax.set_title(os.path.basename(res.name) or "trace")
+    ax.legend(loc="upper right")
+    ax.grid(alpha=0.3)
+    ax2 = fig.add_subplot(gs[1], sharex=ax)
+    resid = (res.force - res.model) * 1e3
+    ax2.plot(res.time, resid, ".", ms=2.5, color="C0")
+    ax2.axhline(0.0, color="k", lw=0.8)
+    ax2.set_ylabel("data - model [mN]")
+    ax2.set_xlabel("time [s]")
+    ax2.grid(alpha=0.3)
+    ax3 = fig.add_subplot(gs[2])
+    ax3.axis("off")
+    se = res.stderr
+    lines = [
+        f"E* = {res.E_star / 1e6:.4g} ± {se['E_star'] / 1e6:.2g} MPa     "
+        f"η = {res.viscosity:.4g} ± {se['viscosity']:.2g} Pa·s     "
+        f"z0 = {res.z0 * 1e6:.4g} ± {se['z0'] * 1e6:.2g} μm",
+        f"β = {res.beta:.4g}    z0/dc = {res.z0_over_dc:.4g}    dc = {res.indent * 1e6:.4g} μm    "
+        f"v0 = {res.speed * 1e3:.4g} mm/s    R = {res.radius * 1e3:.4g} mm    "
+        f"offset = {res.offset * 1e3:.3g} ± {se['offset'] * 1e3:.2g} mN",
+        f"rms residual = {res.rms_residual * 1e3:.3g} mN    "
+        f"{'converged' if res.converged else 'NOT converged'}"
+        f"{'' if res.identifiable else ', NOT identifiable'}    {res.n_iterations} iterations"
+        f" ({res.method})",
+    ]
+    truth = []
+    for label, key, val, scale, unit in [
+        ("E*", "true_E_star_Pa", res.E_star, 1e6, "MPa"),
+        ("η", "true_viscosity_Pa_s", res.viscosity, 1.0, "Pa·s"),
+        ("z0", "true_z0_m", res.z0, 1e-6, "μm"),
+    ]:
+        try:
+            true = float(res.metadata[key])
+        except (KeyError, ValueError):
+            continue
+        truth.append(f"{label} true {true / scale:.4g} {unit} ({100 * (val / true - 1):+.2f} %)")
+    if truth:
+        lines.append("synthetic truth: " + ",  ".join(truth))
+    for i, text in enumerate(lines):
+        ax3.text(0.0, 1.0 - 0.27 * i, text, transform=ax3.transAxes, va="top", fontsize=9.5)
+    folder = os.path.dirname(path)
+    if folder:
+        os.makedirs(folder, exist_ok=True)
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+
+
+def _plot_path(path: str, res: FitResult, several: bool) -> str:
+    if not several:
+        return path
+    stem, ext = os.path.splitext(path)
+    name = os.path.splitext(os.path.basename(res.name))[0] or "trace"
+    return f"{stem}_{name}{ext or '.png'}"
+
+
+def write_table(results, path: str) -> None:
+    """One CSV row per trace with the fitted values, errors and flags."""
+    folder = os.path.dirname(path)
+    if folder:
+        os.makedirs(folder, exist_ok=True)
+    cols = [
+        "trace",
+        "E_star_Pa",
+        "E_star_se",
+        "viscosity_Pa_s",
+        "viscosity_se",
+        "z0_m",
+        "z0_se",
+        "offset_N",
+        "beta",
+        "z0_over_dc",
+        "rms_residual_N",
+        "converged",
+        "identifiable",
+        "n_iterations",
+        "wall_s",
+    ]
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(cols)
+        for r in results:
+            w.writerow(
+                [
+                    r.name,
+                    r.E_star,
+                    r.stderr["E_star"],
+                    r.viscosity,
+                    r.stderr["viscosity"],
+                    r.z0,
+                    r.stderr["z0"],
+                    r.offset,
+                    r.beta,
+                    r.z0_over_dc,
+                    r.rms_residual,
+                    r.converged,
+                    r.identifiable,
+                    r.n_iterations,
+                    r.wall_s,
+                ]
+            )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="lubjax-fit",
+        description="Fit the substrate modulus E*, film viscosity eta and initial gap z0 to "
+        "relaxation traces (CSV: see data/README.md) with the lubjax soft-EHL solver.",
+    )
+    p.add_argument("traces", nargs="+", help="trace CSV file(s)")
+    p.add_argument("--out", help="JSON output (one object, or a list for several traces)")
+    p.add_argument("--table", help="also write a CSV table, one row per trace")
+    p.add_argument(
+        "--plot",
+        help="PNG of data, model, residuals and values (one per trace: "
+        "the trace name is appended when there are several)",
+    )
+    p.add_argument(
+        "--method",
+        choices=("lm", "lbfgs"),
+        default="lm",
+        help="optimiser: Levenberg-Marquardt (default) or optax L-BFGS",
+    )
+    p.add_argument("--no-offset", action="store_true", help="do not fit a constant force offset")
+    p.add_argument("--max-iter", type=int, default=60, help="iteration limit (default 60)")
+    p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    start = time.perf_counter()
+
+    def progress(msg):
+        if not args.quiet:
+            elapsed = time.perf_counter() - start
+            sys.stderr.write(f"\r\033[K[{elapsed:6.1f} s] {msg}"[:200])
+            sys.stderr.flush()
+
+    try:
+        traces = [read_trace(path) for path in args.traces]
+        progress(f"read {len(traces)} trace(s); compiling the solver (first call only) ...")
+        results = fit_traces(
+            traces,
+            method=args.method,
+            fit_offset=not args.no_offset,
+            max_iter=args.max_iter,
+            progress=progress,
+        )
+    except ValueError as exc:
+        if not args.quiet:
+            sys.stderr.write("\n")
+        print(f"lubjax-fit: error: {exc}", file=sys.stderr)
+        return 2
+    if not args.quiet:
+        sys.stderr.write("\r\033[K")
+        sys.stderr.flush()
+    for res in results:
+        print(summary_line(res))
+        for flag in res.flags[1:]:
+            print(f"  warning: {flag}")
+    dicts = [result_to_dict(r) for r in results]
+    if args.out:
+        folder = os.path.dirname(args.out)
+        if folder:
+            os.makedirs(folder, exist_ok=True)
+        with open(args.out, "w", encoding="utf-8") as fh:
+            json.dump(dicts[0] if len(dicts) == 1 else dicts, fh, indent=2)
+        print(f"wrote {args.out}")
+    if args.table:
+        write_table(results, args.table)
+        print(f"wrote {args.table}")
+    if args.plot:
+        for res in results:
+            path = _plot_path(args.plot, res, len(results) > 1)
+            plot_fit(res, path)
+            print(f"wrote {path}")
+    return 0 if all(r.converged for r in results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

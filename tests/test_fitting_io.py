@@ -1,0 +1,120 @@
+"""The trace CSV reader/writer: round trip, bundled files, and errors that name line and column."""
+
+import glob
+import os
+
+import numpy as np
+import pytest
+
+from fitting import format_trace, make_trace, parse_trace, read_trace, scales_from_trace
+
+DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data")
+HEADER = "# radius_m: 2.0e-3\n# poisson_ratio: 0.5\n# sample: bead 3\n"
+
+
+def _rows(n=12, start=0):
+    return "".join(f"{0.1 * k},{1e-6 * max(k - 2, 0)},{1e-3 * k}\n" for k in range(start, n))
+
+
+def _text(header=HEADER, cols="time_s,displacement_m,force_N\n", rows=None):
+    return header + cols + (_rows() if rows is None else rows)
+
+
+def test_parse_valid_trace_keeps_metadata():
+    tr = parse_trace(_text(), name="x.csv")
+    assert tr.radius == pytest.approx(2e-3)
+    assert tr.metadata["poisson_ratio"] == "0.5"
+    assert tr.metadata["sample"] == "bead 3"
+    assert tr.time.size == 12 and tr.force[3] == pytest.approx(3e-3)
+
+
+def test_columns_in_any_order():
+    rows = "".join(f"{1e-3 * k},{0.1 * k},{1e-6 * k}\n" for k in range(12))
+    tr = parse_trace(_text(cols="force_N,time_s,displacement_m\n", rows=rows))
+    np.testing.assert_allclose(tr.time, 0.1 * np.arange(12))
+    np.testing.assert_allclose(tr.displacement, 1e-6 * np.arange(12))
+
+
+def test_round_trip():
+    tr = parse_trace(_text(), name="a")
+    back = parse_trace(format_trace(tr), name="b")
+    np.testing.assert_allclose(back.time, tr.time)
+    np.testing.assert_allclose(back.displacement, tr.displacement, rtol=1e-7)
+    np.testing.assert_allclose(back.force, tr.force, rtol=1e-6)
+    assert back.metadata == tr.metadata
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        (_text(header="# poisson_ratio: 0.5\n"), r"missing '# radius_m"),
+        (_text(header="# radius_m: big\n"), r"line 1: radius_m must be a positive number"),
+        (_text(header="# radius_m: -1\n"), r"line 1: radius_m must be finite and > 0"),
+        (_text(cols="time_s,displacement_m\n"), r"line 4: missing column\(s\) force_N"),
+        (
+            _text(cols="time_s,displacement_m,force_N,temp_C\n"),
+            r"line 4, column 4: unknown column 'temp_C'",
+        ),
+        (_text(cols="time_s,time_s,force_N\n"), r"line 4, column 2: duplicate column 'time_s'"),
+        (
+            _text(rows=_rows(6) + "0.6,abc,0.1\n" + _rows(12, 7)),
+            r"line 11, column 2 \(displacement_m\): 'abc' is not a number",
+        ),
+        (
+            _text(rows=_rows(6) + "0.6,1e-6,nan\n" + _rows(12, 7)),
+            r"line 11, column 3 \(force_N\): 'nan' is not finite",
+        ),
+        (_text(rows=_rows(6) + "0.6,1e-6\n" + _rows(12, 7)), r"line 11: expected 3 cells"),
+        (
+            _text(rows=_rows(6) + "0.5,1e-6,0.1\n" + _rows(12, 7)),
+            r"line 11, column 1 \(time_s\): time 0.5 is not greater",
+        ),
+        (_text(rows=_rows(5)), r"at least 10 data rows"),
+        (HEADER, r"no header row"),
+        (_text() + "# late: 1\n", r"line 17: '# key: value' lines must come before the header"),
+    ],
+)
+def test_malformed_files_name_line_and_column(text, match):
+    with pytest.raises(ValueError, match=match):
+        parse_trace(text, name="bad.csv")
+
+
+def test_error_names_the_file(tmp_path):
+    p = tmp_path / "t.csv"
+    p.write_text(_text(rows=_rows(6) + "0.6,x,0.1\n" + _rows(12, 7)))
+    with pytest.raises(ValueError, match=r"t\.csv: line 11, column 2"):
+        read_trace(p)
+    with pytest.raises(ValueError, match="cannot read"):
+        read_trace(tmp_path / "missing.csv")
+
+
+def test_make_trace_validates():
+    t = np.arange(12.0)
+    with pytest.raises(ValueError, match="row 3, column 'force_N'"):
+        make_trace(t, t, np.where(t == 3, np.nan, t), 1e-3)
+    with pytest.raises(ValueError, match="time_s"):
+        make_trace(t[::-1], t, t, 1e-3)
+    with pytest.raises(ValueError, match="radius_m"):
+        make_trace(t, t, t, 0.0)
+
+
+def test_no_motion_is_an_error():
+    rows = "".join(f"{0.1 * k},0.0,{1e-3 * k}\n" for k in range(12))
+    tr = parse_trace(_text(rows=rows))
+    with pytest.raises(ValueError, match="displacement_m"):
+        scales_from_trace(tr)
+
+
+def test_bundled_traces_are_valid_and_small():
+    files = sorted(
+        glob.glob(os.path.join(DATA, "*.csv")) + glob.glob(os.path.join(DATA, "clean", "*.csv"))
+    )
+    assert len(files) >= 4
+    for path in files:
+        assert os.path.getsize(path) < 1_000_000
+        tr = read_trace(path)
+        s = scales_from_trace(tr)
+        # dc and v0 come from the data: they match the generator's truth.
+        assert s.indent == pytest.approx(float(tr.metadata["true_indent_m"]), rel=1e-3)
+        assert s.speed == pytest.approx(float(tr.metadata["true_speed_m_s"]), rel=1e-2)
+        assert s.t_on == pytest.approx(float(tr.metadata["motion_start_s"]), abs=0.05)
