@@ -104,8 +104,9 @@ def make_plan(
 def force_curve(plan: Plan, beta, z0):
     """F̄ at the plan's grid nodes: a pure function of (β, z̄0), for ``jit``, ``vmap``, ``jacfwd``.
 
-    Prefer forward mode (``jax.jacfwd``/``jax.jvp``) for gradients: reverse mode through the scan
-    stores one LU factorisation per step.
+    Differentiate in forward mode (``jax.jacfwd``/``jax.jvp``): its memory does not grow with the
+    step count. Reverse mode is not available: the step safeguard's ``while_loop`` has no
+    transpose (and reverse mode would store one LU factorisation per step anyway).
     """
     return rollout(plan.disc, beta, z0, plan.travel, plan.coeffs).force
 
