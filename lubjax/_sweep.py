@@ -33,9 +33,9 @@ def _one(disc, coeffs, travel, b, z):
 
 
 # Sharding: the batch is split into one chunk per device and each chunk runs the same
-# single-device jit(vmap(rollout)) with its inputs committed to that device; JAX's asynchronous
-# dispatch runs the chunks concurrently. No SPMD partitioning, so no cross-device step: an SPMD
-# version (jit with NamedSharding, or shard_map) hung intermittently on forced host devices.
+# single-device jit(vmap(rollout)) with its inputs committed to that device. No SPMD
+# partitioning, so no cross-device step: an SPMD version (jit with NamedSharding, or shard_map)
+# hung on forced host devices.
 _batched = jax.jit(jax.vmap(_one, in_axes=(None, None, None, 0, 0)))
 
 
@@ -85,7 +85,15 @@ def sweep(
     compiled = [_batched.lower(*args).compile() for args in per_device]
     compile_s = time.perf_counter() - start
     start = time.perf_counter()
-    outs = [fn(*args) for fn, args in zip(compiled, per_device)]  # dispatched asynchronously
+    # Accelerators run their chunks concurrently (asynchronous dispatch). Host "devices" share
+    # the CPU's LAPACK, and concurrent calls into a single-threaded OpenBLAS
+    # (OPENBLAS_NUM_THREADS=1) deadlocked, so on CPU the chunks run one after another.
+    on_cpu = jax.devices()[0].platform == "cpu"
+    outs = []
+    for fn, args in zip(compiled, per_device):
+        outs.append(fn(*args))
+        if on_cpu:
+            jax.block_until_ready(outs[-1])
     outs = jax.block_until_ready(outs)
     run_s = time.perf_counter() - start
     force = np.concatenate([np.asarray(o[0]) for o in outs])[: b.size]
