@@ -15,7 +15,7 @@ from ._analytic import hertz_force, rigid_squeeze_force  # noqa: E402
 
 def plot_result(res, path: str, test=None) -> None:
     """Force and minimum film against time, and the pressure / film profiles."""
-    fig, ax = plt.subplots(1, 3, figsize=(14, 4))
+    fig, ax = plt.subplots(1, 4, figsize=(18, 4))
     t = res.t
     ax[0].plot(t, res.force, "k-", label="lubjax")
     load = (t > 0.02) & (t < 1) & (res.z0 - t > 0.05)
@@ -42,11 +42,14 @@ def plot_result(res, path: str, test=None) -> None:
     rmax = 2.5
     sel = res.r <= rmax
     for tp, p, h in zip(res.profile_times, res.pressure, res.film):
-        line = ax[2].plot(res.r[sel], p[sel], label=f"p̄, t̄={tp:g}")[0]
-        ax[2].plot(res.r[sel], h[sel], ls=":", color=line.get_color())
+        ax[2].plot(res.r[sel], p[sel], label=f"t̄ = {tp:g}")
+        ax[3].plot(res.r[sel], h[sel], label=f"t̄ = {tp:g}")
     ax[2].set_xlabel("r̄")
-    ax[2].set_ylabel("p̄ (solid), h̄ (dotted)")
+    ax[2].set_ylabel("pressure p̄")
     ax[2].legend(fontsize=7)
+    ax[3].set_xlabel("r̄")
+    ax[3].set_ylabel("film thickness h̄")
+    ax[3].set_ylim(0, None)
     if test is not None:
         fig.suptitle(
             f"E* = {test.E_star:.3g} Pa, η = {test.viscosity:.3g} Pa s, R = {test.radius:.3g} m, "
