@@ -18,9 +18,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .common import at_outputs, film, flux_divergence, fv_setup, make_info, travel
-
-_COMPILED: dict = {}
+from .common import (
+    at_outputs,
+    film,
+    flux_divergence,
+    fv_setup,
+    make_info,
+    run_iterative_rollout,
+    travel,
+)
 
 
 def _rollout(disc, beta, z, dt, tol, max_iter):
@@ -68,21 +74,9 @@ def run(beta, z0, t_out, *, tol=1e-10, max_iter=25, **grid):
     z = jnp.asarray(z0 - travel(t))
     dt = jnp.asarray(np.diff(t))
     setup_s = time.perf_counter() - start
-    key = (disc.r.shape[0], t.size, tol, max_iter)
-    compile_s = 0.0
-    if key not in _COMPILED:
-        fn = jax.jit(lambda d, b, zz, dd: _rollout(d, b, zz, dd, tol, max_iter))
-        start = time.perf_counter()
-        _COMPILED[key] = fn.lower(disc, 1.0, z, dt).compile()
-        compile_s = time.perf_counter() - start
-    start = time.perf_counter()
-    (force, hmin, iters, conv), h0 = jax.block_until_ready(
-        _COMPILED[key](disc, float(beta), z, dt))
-    wall = time.perf_counter() - start
-    force = np.concatenate([[0.0], np.asarray(force)])
-    hmin = np.concatenate([[float(h0)], np.asarray(hmin)])
-    iters = np.asarray(iters)
-    conv = np.asarray(conv)
+    key = ("newton", disc.r.shape[0], t.size, tol, max_iter)
+    force, hmin, iters, conv, wall, compile_s = run_iterative_rollout(
+        key, lambda d, b, zz, dd: _rollout(d, b, zz, dd, tol, max_iter), disc, beta, z, dt)
     info = make_info(wall_s=wall, compile_s=compile_s + setup_s, force=force, film_min=hmin,
                      converged=bool(np.all(conv)), n_steps=t.size - 1,
                      n_nodes=int(disc.r.shape[0]), iterations=int(iters.sum()),

@@ -24,9 +24,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .common import at_outputs, film, fv_setup, make_info, travel, tridiag_parts
-
-_COMPILED: dict = {}
+from .common import (
+    at_outputs,
+    film,
+    fv_setup,
+    make_info,
+    run_iterative_rollout,
+    travel,
+    tridiag_parts,
+)
 
 
 def _rollout(disc, beta, z, dt, omega, tol, max_iter, split):
@@ -84,20 +90,10 @@ def run(beta, z0, t_out, *, omega=0.5, tol=1e-8, max_iter=200, split="elastic", 
     z = jnp.asarray(z0 - travel(t))
     dt = jnp.asarray(np.diff(t))
     setup_s = time.perf_counter() - start
-    key = (disc.r.shape[0], t.size, omega, tol, max_iter, split)
-    compile_s = 0.0
-    if key not in _COMPILED:
-        fn = jax.jit(lambda d, b, zz, dd: _rollout(d, b, zz, dd, omega, tol, max_iter, split))
-        start = time.perf_counter()
-        _COMPILED[key] = fn.lower(disc, 1.0, z, dt).compile()
-        compile_s = time.perf_counter() - start
-    start = time.perf_counter()
-    (force, hmin, iters, conv), h0 = jax.block_until_ready(
-        _COMPILED[key](disc, float(beta), z, dt))
-    wall = time.perf_counter() - start
-    force = np.concatenate([[0.0], np.asarray(force)])
-    hmin = np.concatenate([[float(h0)], np.asarray(hmin)])
-    iters, conv = np.asarray(iters), np.asarray(conv)
+    key = ("picard", disc.r.shape[0], t.size, omega, tol, max_iter, split)
+    force, hmin, iters, conv, wall, compile_s = run_iterative_rollout(
+        key, lambda d, b, zz, dd: _rollout(d, b, zz, dd, omega, tol, max_iter, split),
+        disc, beta, z, dt)
     info = make_info(wall_s=wall, compile_s=compile_s + setup_s, force=force, film_min=hmin,
                      converged=bool(np.all(conv)), n_steps=t.size - 1,
                      n_nodes=int(disc.r.shape[0]), iterations=int(iters.sum()),
