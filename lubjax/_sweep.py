@@ -37,6 +37,17 @@ def _one(disc, coeffs, travel, b, z):
 # partitioning, so no cross-device step: an SPMD version (jit with NamedSharding, or shard_map)
 # hung on forced host devices.
 _batched = jax.jit(jax.vmap(_one, in_axes=(None, None, None, 0, 0)))
+_COMPILED: dict = {}
+
+
+def _compiled_for(args, device):
+    """AOT-compile once per (device, mesh size, step count, chunk size); returns (fn, seconds)."""
+    key = (device.id, args[0].r.shape[0], args[2].shape[0], args[3].shape[0])
+    if key in _COMPILED:
+        return _COMPILED[key], 0.0
+    start = time.perf_counter()
+    _COMPILED[key] = _batched.lower(*args).compile()
+    return _COMPILED[key], time.perf_counter() - start
 
 
 def sweep(
@@ -76,14 +87,16 @@ def sweep(
     zp = np.concatenate([z, np.full(pad, z[-1])])
     chunk = bp.size // n_dev
     shared = (plan.disc, plan.coeffs, plan.travel)
+    used = jax.devices()[:n_dev]
     per_device = [
         jax.device_put((*shared, bp[k * chunk:(k + 1) * chunk], zp[k * chunk:(k + 1) * chunk]), d)
-        for k, d in enumerate(jax.devices()[:n_dev])
+        for k, d in enumerate(used)
     ]
-    start = time.perf_counter()
-    # One executable per device (each is bound to its device's inputs); compile time reported apart.
-    compiled = [_batched.lower(*args).compile() for args in per_device]
-    compile_s = time.perf_counter() - start
+    # One executable per device (each is bound to its device's inputs), cached across calls;
+    # compile time reported apart (0 when cached).
+    compiled_and_time = [_compiled_for(args, d) for args, d in zip(per_device, used)]
+    compiled = [fn for fn, _ in compiled_and_time]
+    compile_s = sum(s for _, s in compiled_and_time)
     start = time.perf_counter()
     # Accelerators run their chunks concurrently (asynchronous dispatch). Host "devices" share
     # the CPU's LAPACK, and concurrent calls into a single-threaded OpenBLAS
