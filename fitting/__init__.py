@@ -27,11 +27,10 @@ from ._fit import (
 from ._io import Trace, format_trace, make_trace, parse_trace, read_trace, write_trace
 from ._model import (
     FIT_SETTINGS,
-    HOLD_DT,
-    Grid,
     Scales,
+    Solver,
     TraceData,
-    make_grid,
+    make_solver,
     predict,
     residuals,
     residuals_and_jacobian,
@@ -41,10 +40,9 @@ from ._model import (
 
 __all__ = [
     "FIT_SETTINGS",
-    "HOLD_DT",
     "FitResult",
-    "Grid",
     "Scales",
+    "Solver",
     "Start",
     "Trace",
     "TraceData",
@@ -52,7 +50,7 @@ __all__ = [
     "fit_traces",
     "format_trace",
     "initial_guess",
-    "make_grid",
+    "make_solver",
     "make_trace",
     "noise_level",
     "parse_trace",

@@ -8,19 +8,22 @@ Scales taken from the data (not from the user):
   t_c = d_c/v0.
 
 The measured travel d(t)/d_c (not an ideal ramp) is the solver's history, linearly interpolated
-onto the solver's time grid. With θ = (ln E*, ln η, ln z0, b/F_u) the model of sample k is
+wherever the stepper needs it. With θ = (ln E*, ln η, ln z0, b/F_u) the model of sample k is
 
     F_k(θ) = (2 E* d_c^{3/2} √R / π) · F̄(t̄_k; β, z̄0) + b,
     β = E* d_c^{5/2} / (6π η v0 R^{3/2}),   z̄0 = z0/d_c                      (paper eqs 8e, 11b)
 
-where F̄ is ``lubjax.rollout`` on the plan's grid, linearly interpolated to t̄_k (F̄ = 0 before the
-motion starts), b a constant load-cell offset and F_u a force unit (the peak measured force) that
-keeps θ of order one. Residuals are r_k = w_k (F_k(θ) - F_k^data)/F_u with w_k ∈ {0, 1} (0 pads
-traces of different lengths to a common shape so that several traces ``vmap`` together).
+where F̄ is the error-controlled ``lubjax.rollout`` read at t̄_k by the stepper's own interpolant
+(F̄ = 0 before the motion starts; the steps do not depend on the sample times, so thousands of
+samples cost no extra steps), b a constant load-cell offset and F_u a force unit (the peak
+measured force) that keeps θ of order one. Residuals are r_k = w_k (F_k(θ) - F_k^data)/F_u
+with w_k ∈ {0, 1} (0 pads traces of different lengths to a common shape so that several traces
+``vmap`` together).
 
-The Jacobian ∂r/∂θ is taken in forward mode (one ``jax.jvp`` per parameter, ``vmap``-ed): the scan
-carries the tangents along, so memory does not grow with the number of steps, unlike reverse mode
-which stores one LU factorisation per step.
+The Jacobian ∂r/∂θ is taken in forward mode (one ``jax.jvp`` per parameter, ``vmap``-ed) through
+the stepper's ``while_loop``: the tangents ride along, so memory does not grow with the number of
+steps, and the loop stops when the slowest trace of a batch is done. Time accuracy is decided by
+the same controller as every other run (``Settings.rtol``), not by a private grid.
 """
 
 from __future__ import annotations
@@ -40,13 +43,9 @@ from ._io import Trace
 N_PARAMS = 4
 PARAM_NAMES = ("E_star", "viscosity", "z0", "offset")
 
-#: Default fit discretisation: coarse and cheap (N ≈ 115 nodes, ~150 steps for the paper's traces),
-#: yet against the fine-grid synthetic traces of data/ its force error is 0.08 % of the peak force
-#: (rms; 1.2 % at the single worst sample, at the stop) — well below 1 % load-cell noise.
-#: ``hold_dt`` caps the time step in the hold (t̄ units) so linear interpolation onto the samples
-#: stays accurate. ``dt_min`` is lowered per fit to 0.05/β (the pressure responds on t̄ ~ 1/β).
-FIT_SETTINGS = lubjax.Settings(dr=0.03, mesh_growth=1.1, dt=0.02, dt_min=1e-3, time_growth=1.2)
-HOLD_DT = 0.2
+#: Default accuracy of the model inside fits: the solver's own defaults (rtol = 1e-3), the same
+#: error control as every other run.
+FIT_SETTINGS = lubjax.Settings()
 
 
 class Scales(NamedTuple):
@@ -111,7 +110,8 @@ def scales_from_trace(trace: Trace) -> Scales:
 class TraceData(NamedTuple):
     """The arrays one trace contributes to the model (a pytree; stack them to ``vmap``)."""
 
-    travel: jax.Array  # d̄ at the plan nodes
+    history: lubjax.SampledTravel  # measured d̄(t̄), padded to a common sample count
+    t_end: jax.Array  # t̄ of the last sample
     t_data: jax.Array  # t̄ of the samples
     force: jax.Array  # measured force [N]
     weight: jax.Array  # 1 for samples, 0 for padding
@@ -121,12 +121,11 @@ class TraceData(NamedTuple):
     force_unit: jax.Array  # F_u
 
 
-class Grid(NamedTuple):
-    """The solver arrays shared by every trace of a batch (a pytree)."""
+class Solver(NamedTuple):
+    """What every trace of a batch shares: the mesh arrays and the tolerance (static)."""
 
     disc: lubjax.Discretisation
-    coeffs: lubjax.StepCoefficients
-    t: jax.Array
+    tol: lubjax.Tolerance
 
 
 def history(trace: Trace, scales: Scales) -> lubjax.SampledTravel:
@@ -140,36 +139,35 @@ def history(trace: Trace, scales: Scales) -> lubjax.SampledTravel:
     )
 
 
-def make_grid(t_end: float, t_end_motion: float, settings=None, hold_dt: float = HOLD_DT) -> Grid:
-    """Time grid from t̄ = 0 (motion start) to ``t_end``, refined after 0 and ``t_end_motion``."""
+def make_solver(settings=None) -> Solver:
+    """Mesh arrays (cached per mesh) and tolerance of ``settings`` (default ``FIT_SETTINGS``)."""
     settings = FIT_SETTINGS if settings is None else settings
-    t = lubjax.time_grid(
-        t_end,
-        dt=settings.dt,
-        dt_min=settings.dt_min,
-        growth=settings.time_growth,
-        t_start=0.0,
-        breakpoints=(0.0, t_end_motion),
-        hold_dt_max=hold_dt,
-    )
-    return Grid(
-        lubjax.discretise(settings.mesh()),
-        lubjax.bdf_coefficients(t, settings.order),
-        jnp.asarray(t),
-    )
+    return Solver(lubjax.discretise(settings.mesh()), settings.tolerance())
 
 
-def trace_data(trace: Trace, scales: Scales, grid: Grid, n_pad: int | None = None) -> TraceData:
-    """Arrays for one trace on ``grid``; pad the samples to ``n_pad`` with zero weight."""
+def _pad_history(hist: lubjax.SampledTravel, n: int) -> lubjax.SampledTravel:
+    """Extend to n samples: times continue past the end, the travel is held (it is anyway)."""
+    extra = n - hist.t.size
+    t = np.concatenate([hist.t, hist.t[-1] + 1.0 + np.arange(extra)])
+    d = np.concatenate([hist.travel_samples, np.full(extra, hist.travel_samples[-1])])
+    return lubjax.SampledTravel(t, d, breakpoints=hist.breakpoints)
+
+
+def trace_data(
+    trace: Trace, scales: Scales, n_pad: int | None = None, n_history: int | None = None
+) -> TraceData:
+    """Arrays for one trace; pad the samples to ``n_pad`` with zero weight and the history to
+    ``n_history`` samples (so traces of different lengths stack)."""
     n = trace.time.size
     n_pad = n if n_pad is None else n_pad
     pad = n_pad - n
     tb = (trace.time - scales.t_on) / scales.time_scale
     hist = history(trace, scales)
-    travel = np.asarray(hist.travel(np.asarray(grid.t)))
+    hist = _pad_history(hist, hist.t.size if n_history is None else n_history)
     R = scales.radius
     return TraceData(
-        travel=jnp.asarray(travel),
+        history=hist,
+        t_end=jnp.asarray(float(tb[-1])),
         t_data=jnp.asarray(np.pad(tb, (0, pad), mode="edge")),
         force=jnp.asarray(np.pad(trace.force, (0, pad), mode="edge")),
         weight=jnp.asarray(np.pad(np.ones(n), (0, pad))),
@@ -182,32 +180,42 @@ def trace_data(trace: Trace, scales: Scales, grid: Grid, n_pad: int | None = Non
     )
 
 
+def history_size(trace: Trace, scales: Scales) -> int:
+    """Number of travel samples :func:`trace_data` uses for ``trace`` before padding."""
+    return int(np.count_nonzero((trace.time - scales.t_on) / scales.time_scale >= 0))
+
+
 def dimensionless(theta, data: TraceData):
     """(β, z̄0) from θ = (ln E*, ln η, ln z0, b/F_u)."""
     beta = jnp.exp(theta[0] - theta[1] + data.log_beta_unit)
     return beta, jnp.exp(theta[2]) / data.indent
 
 
-def predict(theta, data: TraceData, grid: Grid):
-    """Model force [N] at the samples, and the thinnest film min h̄ over the run (must stay > 0)."""
+def predict(theta, data: TraceData, solver: Solver):
+    """Model force [N] at the samples, and the thinnest film min h̄ over the run (must stay > 0;
+    -inf when the run did not reach its last sample)."""
     beta, z0_bar = dimensionless(theta, data)
-    out = lubjax.rollout(grid.disc, beta, z0_bar, data.travel, grid.coeffs)
-    fbar = jnp.interp(data.t_data, grid.t, out.force, left=0.0)
+    traj = lubjax.rollout(
+        solver.disc, beta, z0_bar, data.history, data.t_end, solver.tol, mode="forward"
+    )
+    fbar = lubjax.evaluate(traj.steps, data.t_data, "force")
     force = jnp.exp(theta[0]) * data.force_scale_unit * fbar + theta[3] * data.force_unit
-    return force, jnp.min(out.film_min)
+    film = jnp.min(jnp.where(traj.steps.accepted, traj.steps.film_min, jnp.inf))
+    film = jnp.where(traj.finished, film, -jnp.inf)
+    return force, film
 
 
-def residuals(theta, data: TraceData, grid: Grid):
+def residuals(theta, data: TraceData, solver: Solver):
     """r_k = w_k (F_k(θ) - F_k^data)/F_u, and min h̄ as aux."""
-    force, film_min = predict(theta, data, grid)
+    force, film_min = predict(theta, data, solver)
     return data.weight * (force - data.force) / data.force_unit, film_min
 
 
-def residuals_and_jacobian(theta, data: TraceData, grid: Grid):
+def residuals_and_jacobian(theta, data: TraceData, solver: Solver):
     """(r, J = ∂r/∂θ, min h̄) by forward mode: one jvp per parameter, batched with vmap."""
 
     def f(th):
-        return residuals(th, data, grid)
+        return residuals(th, data, solver)
 
     def column(v):
         (r, film), (dr, _) = jax.jvp(f, (theta,), (v,))
@@ -219,7 +227,8 @@ def residuals_and_jacobian(theta, data: TraceData, grid: Grid):
 
 @functools.lru_cache(maxsize=8)
 def batched_functions():
-    """jit-compiled, trace-batched (vmap over θ and data; the grid is shared) model functions."""
+    """jit-compiled, trace-batched model functions (vmap over θ and data; the solver is shared,
+    its tolerance static)."""
     res = jax.jit(jax.vmap(residuals, in_axes=(0, 0, None)))
     rj = jax.jit(jax.vmap(residuals_and_jacobian, in_axes=(0, 0, None)))
     pred = jax.jit(jax.vmap(predict, in_axes=(0, 0, None)))

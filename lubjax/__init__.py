@@ -1,7 +1,8 @@
 """lubjax: soft elastohydrodynamic lubrication of a sphere on an elastic half-space, in JAX.
 
 The non-iterative scheme of Liu, Dong, Jagota & Hui, Soft Matter 18 (2022) 1219 (one linear
-solve per time step), on a graded mesh with a second-order linearly implicit step.
+solve per time step), on a graded mesh with a second-order linearly implicit step whose size
+an embedded error estimate controls (``Settings.rtol``).
 
 Importing lubjax enables float64 in JAX (``jax_enable_x64``): the solver refuses to run without it.
 """
@@ -21,10 +22,13 @@ from ._indenter import RampHold, SampledTravel  # noqa: E402
 from ._influence import force_weights, influence_matrix, kernel  # noqa: E402
 from ._mesh import Mesh, graded_mesh, uniform_mesh  # noqa: E402
 from ._solve import (  # noqa: E402
+    BETA_RANGE,
+    Z0_RANGE,
     Plan,
     Result,
     Settings,
     SolverError,
+    check_parameters,
     force_curve,
     make_plan,
     relax,
@@ -32,18 +36,16 @@ from ._solve import (  # noqa: E402
 from ._stepper import (  # noqa: E402
     Discretisation,
     State,
-    StepCoefficients,
-    StepOutput,
-    bdf_coefficients,
+    Step,
+    Tolerance,
+    Trajectory,
     discretise,
     displacement,
+    evaluate,
     film_thickness,
-    initial_state,
     rollout,
-    step,
 )
 from ._sweep import SweepResult, sweep  # noqa: E402
-from ._timegrid import time_grid  # noqa: E402
 from ._units import (  # noqa: E402
     RelaxationTest,
     contact_modulus,
@@ -52,6 +54,8 @@ from ._units import (  # noqa: E402
 )
 
 __all__ = [
+    "BETA_RANGE",
+    "Z0_RANGE",
     "Discretisation",
     "Mesh",
     "Plan",
@@ -62,12 +66,15 @@ __all__ = [
     "Settings",
     "SolverError",
     "State",
-    "StepCoefficients",
-    "StepOutput",
-    "bdf_coefficients",
+    "Step",
+    "SweepResult",
+    "Tolerance",
+    "Trajectory",
+    "check_parameters",
     "contact_modulus",
     "discretise",
     "displacement",
+    "evaluate",
     "film_thickness",
     "force_curve",
     "force_weights",
@@ -76,7 +83,6 @@ __all__ = [
     "hertz_force",
     "hertz_pressure",
     "influence_matrix",
-    "initial_state",
     "kernel",
     "make_plan",
     "plane_strain_modulus",
@@ -85,10 +91,7 @@ __all__ = [
     "rigid_squeeze_force",
     "rigid_squeeze_pressure",
     "rollout",
-    "step",
     "sweep",
-    "SweepResult",
-    "time_grid",
     "uniform_mesh",
 ]
 __version__ = "0.1.0"

@@ -1,17 +1,20 @@
 """Indenter histories: the travel d̄(t̄) of the sphere toward the substrate, z̄(t̄) = z̄0 - d̄(t̄).
 
-Every history, ideal or measured, reaches the stepper the same way: its travel evaluated on the
-time grid. The initial gap z̄0 stays a separate scalar so that it can be differentiated, swept
-with ``vmap`` and fitted without rebuilding the history.
+Every history, ideal or measured, reaches the stepper the same way: ``travel(t)`` evaluated
+wherever the step-size controller puts a step. The initial gap z̄0 stays a separate scalar so
+that it can be differentiated, swept with ``vmap`` and fitted without rebuilding the history.
 
-``breakpoints`` are times where the indenter velocity jumps; the default time grid restarts
-small steps there (the pressure responds on the fast time scale 1/β after a velocity jump).
+``breakpoints`` are times where the indenter velocity jumps; the stepper lands a step on each
+and restarts there with a short step (the pressure responds on the fast time scale 1/β after a
+velocity jump). Both histories are pytrees: a batch of measured histories (same sample count)
+can be stacked and ``vmap``-ed.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -38,6 +41,9 @@ class RampHold:
     @property
     def breakpoints(self) -> tuple[float, ...]:
         return (0.0, 1.0) if self.t_accel > 0 else (1.0,)
+
+    def breakpoints_array(self):
+        return jnp.asarray(self.breakpoints)
 
     def travel(self, t):
         t = jnp.asarray(t)
@@ -73,12 +79,19 @@ class SampledTravel:
             raise ValueError("t must be strictly increasing")
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "travel_samples", d)
-        if not self.breakpoints:
+        if not len(self.breakpoints):
             object.__setattr__(self, "breakpoints", _motion_breakpoints(t, d))
+        bp = np.asarray(self.breakpoints, dtype=np.float64).ravel()
+        if not np.all(np.isfinite(bp)):
+            raise ValueError(f"breakpoints must be finite, got {self.breakpoints}")
+        object.__setattr__(self, "breakpoints", tuple(float(b) for b in bp))
 
     @property
-    def t_start(self) -> float:
-        return float(self.t[0])
+    def t_start(self):
+        return self.t[0]
+
+    def breakpoints_array(self):
+        return jnp.asarray(self.breakpoints)
 
     def travel(self, t):
         return jnp.interp(jnp.asarray(t), self.t, self.travel_samples)
@@ -95,3 +108,25 @@ def _motion_breakpoints(t: np.ndarray, d: np.ndarray) -> tuple[float, ...]:
     start = t[max(moving[0] - 1, 0)]
     end = t[min(settled[-1] + 1, t.size - 1)]
     return tuple(sorted({float(start), float(end)}))
+
+
+def _flatten_sampled(h: SampledTravel):
+    # Validated objects hold a tuple; unflattened ones already hold the leaf (array or tracer).
+    bp = h.breakpoints
+    bp = np.asarray(bp, np.float64) if isinstance(bp, tuple) else bp
+    return (h.t, h.travel_samples, bp), None
+
+
+def _unflatten_sampled(_, children):
+    # Bypass __post_init__: under jit/vmap the leaves are tracers (validated when first built),
+    # and the breakpoints stay an array.
+    obj = object.__new__(SampledTravel)
+    for name, value in zip(("t", "travel_samples", "breakpoints"), children):
+        object.__setattr__(obj, name, value)
+    return obj
+
+
+jax.tree_util.register_pytree_node(SampledTravel, _flatten_sampled, _unflatten_sampled)
+jax.tree_util.register_pytree_node(
+    RampHold, lambda h: ((), h.t_accel), lambda aux, _: RampHold(aux)
+)

@@ -45,6 +45,13 @@ class Mesh:
     def length(self) -> float:
         return self.nodes[-1]
 
+    def coarsened(self) -> Mesh:
+        """The nested mesh of every other node (the outer node kept): for error estimates."""
+        nodes = self.nodes[::2]
+        if nodes[-1] != self.nodes[-1]:
+            nodes = (*nodes[:-1], self.nodes[-1])
+        return Mesh(nodes)
+
 
 def uniform_mesh(dr: float, length: float) -> Mesh:
     """Uniform mesh of spacing ``dr`` on [0, length] (the paper's: dr=0.01, length=4)."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import time
 import warnings
 from typing import NamedTuple
@@ -15,59 +16,146 @@ import numpy as np
 from ._indenter import RampHold, SampledTravel
 from ._mesh import Mesh, graded_mesh
 from ._stepper import (
+    DONE,
+    STEP_TOO_SMALL,
     Discretisation,
-    StepCoefficients,
-    bdf_coefficients,
+    Step,
+    Tolerance,
     discretise,
     displacement,
+    evaluate,
     film_thickness,
     rollout,
 )
-from ._timegrid import time_grid
+from ._threads import single_threaded_blas
 
 
 class SolverError(RuntimeError):
-    """A run produced NaN or a negative film: the discretisation is too coarse for the case."""
+    """A run produced NaN or a negative film, or could not reach t_end: see the message."""
+
+
+#: Parameter ranges the solver accepts. Inside them the stepper was mapped (README, stability
+#: map: β ∈ [0.1, 10⁶] × z̄0 ∈ [0.05, 5] to t̄ = 10⁶); outside, the thin-film scales overflow
+#: float64 long before any physics changes.
+BETA_RANGE = (1e-4, 1e9)
+Z0_RANGE = (1e-4, 1e3)
+T_END_MAX = 1e9
+
+
+def _mesh_from_tolerance(rtol: float) -> tuple[float, float, float]:
+    """(dr, mesh growth, L̄) for a tolerance: the spatial error is second order (∝ dr², and
+    ∝ (growth - 1)² outside the fine zone) and the domain truncation is ≈ 4z̄/L̄² of the force
+    (MODEL.md); both are kept below the time error at that rtol (README: accuracy table)."""
+    scale = math.sqrt(rtol / 3e-4)
+    dr = min(0.05, max(0.003, 0.014 * scale))
+    growth = 1.0 + min(0.1, max(0.01, 0.05 * scale))
+    # 4 z̄/L̄² ≤ rtol/25 for z̄ up to 1, rtol/5 at z̄ = 5.
+    length = max(100.0, math.sqrt(100.0 / rtol))
+    return dr, growth, length
 
 
 @dataclasses.dataclass(frozen=True)
 class Settings:
-    """Discretisation settings. The defaults keep F̄(t̄) within 0.1 % (relative to its peak) of the
-    converged answer for β ∈ [1, 10³], z̄0 ∈ [0.5, 2] (README: refinement table, reproduced by
-    ``python benchmarks/refinement.py``).
+    """Accuracy settings. ``rtol`` is *the* accuracy knob: it sets the time-step controller's
+    tolerance and, unless given explicitly, the mesh (``dr``, ``mesh_growth``, ``length``).
 
     Attributes:
-        dr: mesh spacing in the fine zone [0, r_fine].
+        rtol, atol: local error tolerance of every step on the film h̄ (each node) and on F̄:
+            |error| ≤ atol + rtol·|value|. The force is held to rtol pointwise down to
+            F̄ ≈ atol/rtol (a decaying tail: F̄ ~ 10⁻⁹ at β = 10³, z̄0 = 2 is still 10⁻⁶ of its
+            peak), hence the small atol. The global error is a few times rtol (README table).
+        dr: mesh spacing in the fine zone [0, r_fine] (default: from rtol).
         r_fine: edge of the uniform fine zone (covers the Hertz radius √(1-z̄0) ≤ 1 and its rim).
-        length: domain length L̄ with p̄(L̄) = 0; force truncation ~ 2z̄/L̄².
-        mesh_growth: cell-size ratio beyond r_fine.
-        dt: largest step in the loading phase.
-        dt_min: first step after a velocity jump.
-        time_growth: step growth ratio after a jump (unbounded in the hold).
+        length: domain length L̄ with p̄(L̄) = 0; force truncation ≈ 4z̄/L̄² (default: from rtol).
+        mesh_growth: cell-size ratio beyond r_fine (default: from rtol).
         order: 2 (BDF2, default) or 1 (backward Euler, the paper's).
+        initial_step: first step at t̄_start and after each velocity jump, in units of
+            min(1, 1/β) (the pressure's fast time scale).
+        max_steps: budget of attempted steps (accepted + rejected); running out is an error.
+        error_estimate: also run the nested coarse mesh (every other node) at rtol and at
+            8·rtol, and return ``Result.force_error`` (about +30 % run time).
     """
 
-    dr: float = 0.02
+    rtol: float = 3e-4
+    atol: float = 1e-14
+    dr: float | None = None
     r_fine: float = 1.6
-    length: float = 100.0
-    mesh_growth: float = 1.04
-    dt: float = 5e-3
-    dt_min: float = 1e-6
-    time_growth: float = 1.1
+    length: float | None = None
+    mesh_growth: float | None = None
     order: int = 2
+    initial_step: float = 1e-5
+    max_steps: int = 20_000
+    error_estimate: bool = True
+
+    def __post_init__(self):
+        for name in ("rtol", "atol", "r_fine", "initial_step"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not (
+                isinstance(value, numbers.Real) and math.isfinite(value) and value > 0
+            ):
+                raise ValueError(f"Settings.{name} must be a finite number > 0, got {value!r}")
+        if not 1e-10 <= self.rtol <= 0.1:
+            raise ValueError(f"Settings.rtol must be in [1e-10, 0.1], got {self.rtol}")
+        if self.order not in (1, 2):
+            raise ValueError(f"Settings.order must be 1 or 2, got {self.order!r}")
+        if not (isinstance(self.max_steps, int) and self.max_steps >= 10):
+            raise ValueError(f"Settings.max_steps must be an integer >= 10, got {self.max_steps!r}")
+        for name in ("dr", "length", "mesh_growth"):
+            value = getattr(self, name)
+            if value is not None and not (isinstance(value, numbers.Real) and value > 0):
+                raise ValueError(f"Settings.{name} must be > 0 or None, got {value!r}")
+
+    def mesh_parameters(self) -> tuple[float, float, float]:
+        dr, growth, length = _mesh_from_tolerance(self.rtol)
+        return (
+            self.dr if self.dr is not None else dr,
+            self.mesh_growth if self.mesh_growth is not None else growth,
+            self.length if self.length is not None else length,
+        )
 
     def mesh(self) -> Mesh:
-        return graded_mesh(self.dr, self.r_fine, self.length, self.mesh_growth)
+        dr, growth, length = self.mesh_parameters()
+        return graded_mesh(dr, self.r_fine, length, growth)
+
+    def tolerance(self) -> Tolerance:
+        return Tolerance(self.rtol, self.atol, self.initial_step, self.order, self.max_steps)
 
 
 class Plan(NamedTuple):
     """Everything that does not depend on (β, z̄0): reuse it across runs, fits and sweeps."""
 
     disc: Discretisation
-    coeffs: StepCoefficients
-    t: np.ndarray  # grid nodes t̄
-    travel: jax.Array  # indenter travel d̄ at the nodes
+    tol: Tolerance
+    history: RampHold | SampledTravel
+    t_end: float
+    t: np.ndarray  # output times of force_curve
     mesh: Mesh
+
+
+def _check_t_end(t_end, t_start) -> float:
+    if isinstance(t_end, bool) or not isinstance(t_end, (numbers.Real, np.ndarray, jax.Array)):
+        raise ValueError(f"t_end must be a number, got {t_end!r}")
+    if np.ndim(t_end) != 0:
+        raise ValueError(f"t_end must be a scalar, got shape {np.shape(t_end)}")
+    value = float(t_end)
+    if not (math.isfinite(value) and t_start < value <= T_END_MAX):
+        raise ValueError(f"t_end must be finite and in ({t_start:g}, {T_END_MAX:g}], got {t_end!r}")
+    return value
+
+
+def _check_times(times, name, t_start, t_end) -> np.ndarray:
+    try:
+        arr = np.asarray(times, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a 1-D sequence of numbers, got {times!r}") from None
+    arr = np.atleast_1d(arr)
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be 1-D, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {arr[~np.isfinite(arr)][:3]}")
+    if arr.size and (arr.min() < t_start or arr.max() > t_end):
+        raise ValueError(f"{name} must lie in [{t_start:g}, {t_end:g}], got {arr}")
+    return arr
 
 
 def make_plan(
@@ -75,40 +163,36 @@ def make_plan(
     *,
     history: RampHold | SampledTravel | None = None,
     settings: Settings | None = None,
-    include: tuple[float, ...] = (),
+    times=None,
 ) -> Plan:
-    """Build mesh, influence matrix (cached per mesh), time grid and travel for a run."""
+    """Mesh and influence matrix (cached per mesh), tolerance, history and output times.
+
+    ``times``: where :func:`force_curve` reports F̄ (default 501 equally spaced times).
+    """
     history = RampHold() if history is None else history
     settings = Settings() if settings is None else settings
-    if not (isinstance(t_end, (int, float)) and math.isfinite(t_end) and t_end > history.t_start):
-        raise ValueError(f"t_end must be finite and > {history.t_start}, got {t_end!r}")
+    t_start = float(history.t_start)
+    t_end = _check_t_end(t_end, t_start)
+    if times is None:
+        times = np.linspace(t_start, t_end, 501)
+    times = _check_times(times, "times", t_start, t_end)
     mesh = settings.mesh()
-    t = time_grid(
-        t_end,
-        dt=settings.dt,
-        dt_min=settings.dt_min,
-        growth=settings.time_growth,
-        t_start=history.t_start,
-        breakpoints=history.breakpoints,
-        include=include,
-    )
-    return Plan(
-        disc=discretise(mesh),
-        coeffs=bdf_coefficients(t, settings.order),
-        t=t,
-        travel=jnp.asarray(history.travel(t)),
-        mesh=mesh,
-    )
+    return Plan(discretise(mesh), settings.tolerance(), history, t_end, times, mesh)
 
 
-def force_curve(plan: Plan, beta, z0):
-    """F̄ at the plan's grid nodes: a pure function of (β, z̄0), for ``jit``, ``vmap``, ``jacfwd``.
+def force_curve(plan: Plan, beta, z0, times=None, *, mode: str = "reverse"):
+    """F̄ at ``times`` (default ``plan.t``): a pure function of (β, z̄0) for ``jit``, ``vmap``,
+    ``jax.grad``, ``jacfwd`` and ``jacrev``.
 
-    Differentiate in forward mode (``jax.jacfwd``/``jax.jvp``): its memory does not grow with the
-    step count. Reverse mode is not available: the step safeguard's ``while_loop`` has no
-    transpose (and reverse mode would store one LU factorisation per step anyway).
+    ``mode="reverse"`` (default) runs a checkpointed ``lax.scan`` over the plan's attempt budget
+    (``Settings.max_steps``), so reverse-mode AD works; finished attempts are skipped with
+    ``lax.cond``, but under ``vmap`` every batch member pays the whole budget, so for batched
+    forward-only use pass ``mode="forward"`` (a ``while_loop``: jvp/jacfwd and vmap, no vjp).
+    Times the run did not reach (budget exhausted) come back as NaN.
     """
-    return rollout(plan.disc, beta, z0, plan.travel, plan.coeffs).force
+    times = plan.t if times is None else times
+    traj = rollout(plan.disc, beta, z0, plan.history, plan.t_end, plan.tol, mode=mode)
+    return evaluate(traj.steps, times, "force")
 
 
 def _check_x64():
@@ -120,14 +204,17 @@ def _check_x64():
         )
 
 
-def _check_params(beta, z0):
-    for name, v, rng in [("beta", beta, "(0, inf)"), ("z0", z0, "(0, inf)")]:
+def check_parameters(beta, z0):
+    """ValueError naming the parameter unless β and z̄0 lie in the solver's ranges."""
+    for name, v, (lo, hi) in [("beta", beta, BETA_RANGE), ("z0", z0, Z0_RANGE)]:
+        if isinstance(v, bool):
+            raise ValueError(f"{name} must be a number in [{lo:g}, {hi:g}], got {v!r}")
         try:
             f = float(v)
         except (TypeError, ValueError):
-            raise ValueError(f"{name} must be a number in {rng}, got {v!r}") from None
-        if not (math.isfinite(f) and f > 0):
-            raise ValueError(f"{name} must be finite and in {rng}, got {v!r}")
+            raise ValueError(f"{name} must be a number in [{lo:g}, {hi:g}], got {v!r}") from None
+        if not (math.isfinite(f) and lo <= f <= hi):
+            raise ValueError(f"{name} must be finite and in [{lo:g}, {hi:g}], got {v!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -135,16 +222,23 @@ class Result:
     """A relaxation run (dimensionless). Arrays are numpy.
 
     Attributes:
-        t: grid nodes t̄; force F̄, film_min min h̄, film_center h̄(0) at each node.
-        outflow: volume flux through the outer boundary per unit 2π at each node.
+        t: accepted step times t̄ (the controller's); force F̄, film_min min h̄, film_center h̄(0)
+            and outflow (volume flux through the outer boundary per unit 2π) at those times.
+            Read any of them at other times with :meth:`at` (the stepper's interpolant).
         profile_times: the requested profile times; r: the mesh;
         pressure, displacement, film: p̄, w̄, h̄ at those times, shape (len(profile_times), N).
-        finite: no NaN/inf anywhere; film_positive: h̄ > 0 everywhere at every step.
-        compile_s, run_s: wall time of compilation (0 when cached) and of the run itself.
+        finite: no NaN/inf; film_positive: h̄ > 0 at every accepted step;
+        finished: t_end reached (not stopped by the step budget or a collapsing step).
+        force_error: estimated error of ``force`` at ``t`` (NaN if Settings.error_estimate is
+            off): space |F̄ - F̄_coarse|/3 (second order, nested mesh of every other node) plus
+            time |F̄_coarse - F̄_coarse(8 rtol)|/(8^{2/3} - 1) (global error ∝ rtol^{2/3}).
+        accepted, rejected: step counts. compile_s, run_s: wall time of compilation (0 when
+        cached) and of the run itself.
     """
 
     beta: float
     z0: float
+    t_end: float
     t: np.ndarray
     force: np.ndarray
     film_min: np.ndarray
@@ -157,12 +251,25 @@ class Result:
     film: np.ndarray
     finite: bool
     film_positive: bool
+    finished: bool
+    stop_reason: str
+    force_error: np.ndarray
+    accepted: int
+    rejected: int
     compile_s: float
     run_s: float
+    steps: Step = dataclasses.field(repr=False)
 
     @property
     def ok(self) -> bool:
-        return self.finite and self.film_positive
+        return self.finite and self.film_positive and self.finished
+
+    def at(self, times, field: str = "force") -> np.ndarray:
+        """``field`` ("force", "film_min", "film_center") at any ``times`` in [t̄_start, t_end]."""
+        if field not in ("force", "film_min", "film_center"):
+            raise ValueError(f"field must be 'force', 'film_min' or 'film_center', got {field!r}")
+        times = _check_times(times, "times", float(self.t[0]), self.t_end)
+        return np.asarray(evaluate(self.steps, times, field))
 
     def problems(self) -> list[str]:
         out = []
@@ -172,20 +279,29 @@ class Result:
             i = int(np.nanargmin(self.film_min))
             h, t = self.film_min[i], self.t[i]
             out.append(f"the film went negative (h̄_min = {h:.3g} at t̄ = {t:.4g})")
+        if not self.finished:
+            out.append(f"the run stopped at t̄ = {self.t[-1]:.4g} < t_end: {self.stop_reason}")
         return out
 
 
 _COMPILED: dict = {}
 
 
-def _compiled_rollout(plan: Plan, save_profiles: bool):
-    """AOT-compile once per (mesh size, step count, profiles): lets us report compile time apart."""
-    key = (plan.disc.r.shape[0], plan.t.size, save_profiles)
+def _compiled_rollout(disc, history, tol: Tolerance, n_profiles: int):
+    """AOT-compile once per (mesh size, history structure, tolerance, profile count): lets us
+    report compile time apart."""
+    leaves, treedef = jax.tree_util.tree_flatten(history)
+    key = (disc.r.shape[0], treedef, tuple(np.shape(x) for x in leaves), tol, n_profiles)
     if key in _COMPILED:
         return _COMPILED[key], 0.0
-    fn = jax.jit(lambda d, b, z, tr, c: rollout(d, b, z, tr, c, save_profiles=save_profiles))
+
+    def run(d, b, z, h, te, pt):
+        return rollout(d, b, z, h, te, tol, pt, mode="forward")
+
     start = time.perf_counter()
-    compiled = fn.lower(plan.disc, 1.0, 1.0, plan.travel, plan.coeffs).compile()
+    compiled = (
+        jax.jit(run).lower(disc, 1.0, 1.0, history, 1.0, np.zeros(n_profiles)).compile()
+    )
     _COMPILED[key] = compiled
     return compiled, time.perf_counter() - start
 
@@ -200,73 +316,106 @@ def relax(
     profile_times=(),
     check: str = "raise",
 ) -> Result:
-    """Simulate a relaxation test (paper eqs 8, 11b) in dimensionless form.
+    """Simulate a relaxation test (paper eqs 8, 11b) in dimensionless form, error-controlled.
 
     Args:
-        beta: β > 0, eq 8e. z0: z̄0 = z0/d_c > 0.
-        t_end: final time t̄ (t_c units). A hold to 10⁴ costs a few hundred extra steps.
+        beta: β (eq 8e), in [1e-4, 1e9]. z0: z̄0 = z0/d_c, in [1e-4, 1e3].
+        t_end: final time t̄ (t_c units). Steps grow as the solution slows: a hold to t̄ = 10⁶
+            costs a few hundred steps.
         history: indenter travel, ``RampHold()`` (eqs 8c,d; eq 23 with ``t_accel``) or
             ``SampledTravel`` (a measured history).
-        settings: discretisation (defaults: see :class:`Settings`).
-        profile_times: times at which p̄, w̄, h̄ profiles are returned (made grid nodes).
-        check: "raise" (default) raises SolverError on NaN or a negative film; "warn" warns;
-            "flag" only sets ``Result.finite`` / ``Result.film_positive``.
+        settings: tolerance and mesh (defaults: see :class:`Settings`).
+        profile_times: times at which p̄, w̄, h̄ profiles are returned (by the stepper's
+            interpolant: the steps do not depend on them).
+        check: "raise" (default) raises SolverError on NaN, a negative film or a run that did
+            not reach t_end; "warn" warns; "flag" only sets the flags of :class:`Result`.
     """
     _check_x64()
-    _check_params(beta, z0)
+    check_parameters(beta, z0)
     if check not in ("raise", "warn", "flag"):
         raise ValueError(f"check must be 'raise', 'warn' or 'flag', got {check!r}")
-    ptimes = np.atleast_1d(np.asarray(profile_times, dtype=np.float64))
     history = RampHold() if history is None else history
-    if ptimes.size and (np.any(ptimes < history.t_start) or np.any(ptimes > t_end)):
-        raise ValueError(f"profile_times must lie in [{history.t_start}, {t_end}], got {ptimes}")
-    plan = make_plan(t_end, history=history, settings=settings, include=tuple(ptimes))
-    save = bool(ptimes.size)
-    compiled, compile_s = _compiled_rollout(plan, save)
+    settings = Settings() if settings is None else settings
+    t_start = float(history.t_start)
+    t_end = _check_t_end(t_end, t_start)
+    ptimes = _check_times(profile_times, "profile_times", t_start, t_end)
+    mesh = settings.mesh()
+    disc = discretise(mesh)
+    tol = settings.tolerance()
+    runs = [(disc, tol, ptimes)]
+    if settings.error_estimate:
+        coarse = discretise(mesh.coarsened())
+        loose = dataclasses.replace(tol, rtol=min(8 * tol.rtol, 0.1))
+        runs += [(coarse, tol, ptimes[:0]), (coarse, loose, ptimes[:0])]
+    compiled, compile_s = [], 0.0
+    for d, t, pt in runs:
+        fn, seconds = _compiled_rollout(d, history, t, pt.size)
+        compiled.append(fn)
+        compile_s += seconds
     start = time.perf_counter()
-    out = compiled(plan.disc, float(beta), float(z0), plan.travel, plan.coeffs)
-    out = jax.tree_util.tree_map(np.asarray, jax.block_until_ready(out))
+    with single_threaded_blas():
+        trajs = [
+            jax.block_until_ready(fn(d, float(beta), float(z0), history, t_end, pt))
+            for fn, (d, _, pt) in zip(compiled, runs)
+        ]
     run_s = time.perf_counter() - start
+    traj = trajs[0]
 
-    n = plan.disc.r.shape[0]
-    if save:
-        idx = np.searchsorted(plan.t, ptimes)
-        p = out.pressure[idx]
-        z = float(z0) - np.asarray(plan.travel)[idx]
-        w = np.stack([np.asarray(displacement(plan.disc, pi)) for pi in p])
-        h = np.stack([np.asarray(film_thickness(plan.disc, zi, pi)) for zi, pi in zip(z, p)])
-    else:
-        p = w = h = np.zeros((0, n))
-    finite = bool(
-        np.all(np.isfinite(out.force))
-        and np.all(np.isfinite(out.film_min))
-        and np.all(np.isfinite(p))
+    steps = traj.steps
+    keep = np.asarray(steps.accepted)
+    series = {k: np.asarray(getattr(steps, k))[keep] for k in
+              ("t", "force", "film_min", "film_center", "outflow")}
+    p = np.asarray(traj.profiles)
+    z = float(z0) - np.asarray(history.travel(ptimes)) if ptimes.size else np.zeros(0)
+    w = np.stack([np.asarray(displacement(disc, pi)) for pi in p]) if ptimes.size else p
+    h = (
+        np.stack([np.asarray(film_thickness(disc, zi, pi)) for zi, pi in zip(z, p)])
+        if ptimes.size else p
     )
+    if settings.error_estimate:
+        coarse_f, loose_f = (np.asarray(evaluate(tr.steps, series["t"])) for tr in trajs[1:])
+        force_error = np.abs(series["force"] - coarse_f) / 3 + np.abs(coarse_f - loose_f) / (
+            8 ** (2 / 3) - 1
+        )
+    else:
+        force_error = np.full_like(series["force"], np.nan)
+    status = int(traj.status)
+    finished = status == DONE
+    if finished:
+        reason = ""
+    elif status == STEP_TOO_SMALL:
+        reason = (
+            "the step size collapsed (the film could not be kept positive); loosen nothing, "
+            "but refine the mesh (Settings.dr) or check the parameters"
+        )
+    else:
+        reason = (
+            f"the step budget Settings.max_steps = {tol.max_steps} ran out; raise it "
+            "(CLI: --max-steps) or shorten t_end"
+        )
     result = Result(
         beta=float(beta),
         z0=float(z0),
-        t=plan.t,
-        force=out.force,
-        film_min=out.film_min,
-        film_center=out.film_center,
-        outflow=out.outflow,
-        r=np.asarray(plan.disc.r),
+        t_end=t_end,
+        **series,
+        r=np.asarray(disc.r),
         profile_times=ptimes,
         pressure=p,
         displacement=w,
         film=h,
-        finite=finite,
-        film_positive=bool(np.all(out.film_min > 0)),
+        finite=bool(np.all(np.isfinite(series["force"])) and np.all(np.isfinite(p))),
+        film_positive=bool(np.all(series["film_min"] > 0)),
+        finished=finished,
+        stop_reason=reason,
+        force_error=force_error,
+        accepted=int(traj.accepted),
+        rejected=int(traj.rejected),
         compile_s=compile_s,
         run_s=run_s,
+        steps=jax.tree_util.tree_map(jnp.asarray, steps),
     )
     if not result.ok and check != "flag":
-        msg = (
-            f"relax(beta={beta}, z0={z0}): "
-            + "; ".join(result.problems())
-            + ". Refine the mesh at the contact (Settings.dr) or the time step (Settings.dt, "
-            "Settings.time_growth), or pass check='flag' to inspect the run."
-        )
+        msg = f"relax(beta={beta}, z0={z0}): " + "; ".join(result.problems())
         if check == "raise":
             raise SolverError(msg)
         warnings.warn(msg, RuntimeWarning, stacklevel=2)

@@ -1,4 +1,4 @@
-r"""The linearly implicit time stepper (paper Section 5, eqs 17-22), as a ``lax.scan``.
+r"""The error-controlled, linearly implicit time stepper (paper Section 5, eqs 17-22).
 
 Reynolds (eq 8a) in conservative, finite-volume form on a (graded) mesh. Node i owns the cell
 [r̄_{i-1/2}, r̄_{i+1/2}] (midpoints; r̄_{-1/2} = 0) of area measure A_i = (r̄²_{i+1/2} - r̄²_{i-1/2})/2:
@@ -9,23 +9,37 @@ with mobility k = h̄³ on the faces and h̄ = z̄ + r̄²/2 + Ŵ p̄ (eq 8a wit
 The axis needs no special row: the face at r̄ = 0 carries no flux, which is ∂p̄/∂r̄ = 0 there
 (eq 22a). The outer node carries p̄ = 0 (eq 22b) at a large L̄.
 
+Every attempted step is still the paper's *one* linear solve: the mobility is taken from known
+levels (eq 19), so the step is linear in p̄ⁿ⁺¹. What changed is who chooses the step: an embedded
+error estimate and a PI controller (:mod:`lubjax._controller`), not a hand-made grid.
+
 Departures from the paper, and why:
 
 * Conservative form instead of the expanded form (17a) with the one-sided ∂p̄/∂r̄ (17c): it is
   second-order in space on any mesh (17c is first order), and the film volume changes exactly by
   the flux through the outer face (tested).
-* Time derivative by variable-step BDF2 (BDF1 = the paper's backward Euler for the first step
-  and on request). Like the paper (eq 19) the nonlinearity sits only in the mobility, which is
-  taken from known levels so each step is one linear solve, no iteration. For BDF2 the mobility
-  film is extrapolated *geometrically*, h̄* = h̄ⁿ (h̄ⁿ/h̄ⁿ⁻¹)^ω with ω = Δt̄ₙ/Δt̄ₙ₋₁: second-order like
-  linear extrapolation, but positive whenever the film is, which linear extrapolation of a
-  draining film is not.
-* Since h̄ⁿ = z̄ⁿ + r̄²/2 + Ŵp̄ⁿ, the unknown is p̄ⁿ⁺¹ alone: one (N-1)×(N-1) dense solve per step
+* Time derivative by variable-step BDF2 (the paper's backward Euler, BDF1, starts every segment).
+  For BDF2 the mobility film is extrapolated *geometrically*, h̄* = h̄ⁿ (h̄ⁿ/h̄ⁿ⁻¹)^ω with
+  ω = Δt̄ₙ/Δt̄ₙ₋₁: second-order like linear extrapolation, but positive whenever the film is.
+* Adaptive steps: the difference between the BDF2 solution and the quadratic extrapolation of the
+  accepted history estimates the local error (Milne's device); a step is rejected and retried
+  shorter when that error exceeds the tolerance *or* when the film would lose positivity (the
+  paper's scheme drives it negative, MODEL.md). No separate safeguard.
+* Since h̄ⁿ = z̄ⁿ + r̄²/2 + Ŵp̄ⁿ, the unknown is p̄ⁿ⁺¹ alone: one (N-1)×(N-1) dense solve per attempt
   with Ŵ precomputed (the paper solves the 2N×2N system in p̄ and w̄).
+* Velocity jumps of the indenter (``history.breakpoints``) are landed on exactly, and the
+  integration restarts there with a short backward-Euler step, as at t̄ = 0: the pressure then
+  adjusts on the fast time scale 1/β.
+
+The loop over attempts is a ``lax.while_loop`` (``mode="forward"``: stops when done; jit, vmap,
+jvp) or a ``lax.scan`` over a fixed budget of attempts with finished attempts masked by
+``lax.cond`` and each body under ``jax.checkpoint`` (``mode="reverse"``: also vjp / ``jax.grad``,
+memory ∝ budget × state, not a factorisation per step). Both run the same attempt function.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from typing import NamedTuple
 
@@ -33,6 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _controller as ctrl
 from ._influence import force_weights, influence_matrix
 from ._mesh import Mesh
 
@@ -57,60 +72,101 @@ def discretise(mesh: Mesh) -> Discretisation:
     outer = np.concatenate([face, [r[-1]]])
     inner = np.concatenate([[0.0], face])
     area = 0.5 * (outer**2 - inner**2)
+    w = influence_matrix(mesh)
     return Discretisation(
         r=jnp.asarray(r),
         cell_area=jnp.asarray(area),
         face_r=jnp.asarray(face),
         face_gap=jnp.asarray(np.diff(r)),
-        influence=jnp.asarray(influence_matrix(mesh)),
-        area_influence=jnp.asarray(area[:-1, None] * influence_matrix(mesh)[:-1, :-1]),
+        influence=jnp.asarray(w),
+        area_influence=jnp.asarray(area[:-1, None] * w[:-1, :-1]),
         force_weights=jnp.asarray(force_weights(mesh)),
     )
 
 
-class StepCoefficients(NamedTuple):
-    """Per-step scheme coefficients (leading axis: steps), see :func:`bdf_coefficients`."""
+@jax.tree_util.register_static
+@dataclasses.dataclass(frozen=True)
+class Tolerance:
+    """What the controller needs. A static pytree (no leaves): passed through ``jit`` and
+    ``vmap`` as part of the compiled function's identity.
 
-    dt: jax.Array  # Δt̄ₙ
-    a0: jax.Array  # dh/dt ≈ (a0 hⁿ⁺¹ + a1 hⁿ + a2 hⁿ⁻¹)/Δt̄ₙ
-    a1: jax.Array
-    a2: jax.Array
-    extrapolation: jax.Array  # ω in h* = hⁿ (hⁿ/hⁿ⁻¹)^ω (0: lagged mobility)
+    rtol, atol: the step's estimated local error e (film h̄ at every node, and F̄) must satisfy
+        |e| ≤ atol + rtol·|value|. initial_step: the first step after t̄_start and after each
+        velocity jump, divided by max(1, β). order: 2 (BDF2) or 1 (backward Euler throughout).
+        max_steps: the attempt budget (accepted + rejected).
+    """
+
+    rtol: float = 3e-4
+    atol: float = 1e-14
+    initial_step: float = 1e-5
+    order: int = 2
+    max_steps: int = 20_000
 
 
-def bdf_coefficients(t: np.ndarray, order: int = 2) -> StepCoefficients:
-    """Variable-step BDF coefficients for the grid ``t``; the first step is always BDF1."""
-    if order not in (1, 2):
-        raise ValueError(f"order must be 1 (backward Euler) or 2 (BDF2), got {order}")
-    t = np.asarray(t, dtype=np.float64)
-    dt = np.diff(t)
-    if dt.size < 1 or np.any(dt <= 0):
-        raise ValueError("time grid must be strictly increasing with at least 2 nodes")
-    a0, a1, a2 = np.ones_like(dt), -np.ones_like(dt), np.zeros_like(dt)
-    omega = np.zeros_like(dt)
-    if order == 2 and dt.size > 1:
-        w = dt[1:] / dt[:-1]
-        a0[1:] = (1 + 2 * w) / (1 + w)
-        a1[1:] = -(1 + w)
-        a2[1:] = w**2 / (1 + w)
-        omega[1:] = w
-    return StepCoefficients(*(jnp.asarray(x) for x in (dt, a0, a1, a2, omega)))
+DEFAULT_TOLERANCE = Tolerance()
+
+# Status codes of a run.
+RUNNING, DONE, STEP_TOO_SMALL = 0, 1, 2
 
 
 class State(NamedTuple):
+    """Stepper state at the last accepted level t_n, with the history BDF2 and the error estimate
+    need (levels n-1, n-2), and the controller's memory. A pytree."""
+
+    t: jax.Array
+    dt_prev: jax.Array  # t_n - t_{n-1}
+    dt_prev2: jax.Array  # t_{n-1} - t_{n-2}
     pressure: jax.Array  # p̄ⁿ (N,)
+    pressure_prev: jax.Array  # p̄ⁿ⁻¹ (N,)
     film: jax.Array  # h̄ⁿ (N,)
-    film_prev: jax.Array  # h̄ⁿ⁻¹ (N,)
+    film_prev: jax.Array
+    film_prev2: jax.Array
     gap: jax.Array  # z̄ⁿ
-    gap_prev: jax.Array  # z̄ⁿ⁻¹
+    gap_prev: jax.Array
+    force: jax.Array  # F̄ⁿ
+    force_prev: jax.Array
+    force_prev2: jax.Array
+    force_peak: jax.Array  # max F̄ so far (the scale of roundoff in F̄)
+    since_restart: jax.Array  # accepted steps since the last (re)start: 0, 1, ≥2
+    dt_next: jax.Array  # the controller's proposal
+    error_prev: jax.Array  # error ratio of the last accepted step
+    last_rejected: jax.Array
+    accepted: jax.Array  # counters
+    rejected: jax.Array
+    status: jax.Array  # RUNNING, DONE, STEP_TOO_SMALL
+    entry: jax.Array  # index of the output entry of level n, and of n-1
+    entry_prev: jax.Array
+    profiles: jax.Array  # p̄ at the requested profile times (P, N)
 
 
-class StepOutput(NamedTuple):
-    force: jax.Array  # F̄ⁿ⁺¹ (eq 11b)
-    film_min: jax.Array  # min_i h̄_iⁿ⁺¹
-    film_center: jax.Array  # h̄ⁿ⁺¹ at r̄ = 0
-    outflow: jax.Array  # volume flux out through the last face, Σ over 2π omitted
-    pressure: jax.Array | None  # p̄ⁿ⁺¹ when profiles are saved
+class Step(NamedTuple):
+    """One output entry per attempt (entry 0: the initial state). A rejected attempt, or one after
+    the run ended, repeats the last accepted level, so the entries are sorted in ``t``."""
+
+    t: jax.Array
+    force: jax.Array  # F̄ (eq 11b)
+    film_center: jax.Array  # h̄ at r̄ = 0
+    film_min: jax.Array  # min_i h̄_i
+    outflow: jax.Array  # volume flux out through the last face, per unit 2π
+    accepted: jax.Array  # this entry is a new accepted level
+    stencil: jax.Array  # entries of levels n-1 and n (for the interpolant), (2,)
+    linear: jax.Array  # interpolate linearly (a backward-Euler step)
+
+
+class Trajectory(NamedTuple):
+    """What :func:`rollout` returns: the step entries, the profiles, and how the run ended."""
+
+    steps: Step  # leading axis: max_steps + 1 entries
+    profiles: jax.Array  # p̄ at the requested times, (P, N)
+    status: jax.Array
+    accepted: jax.Array
+    rejected: jax.Array
+    t_final: jax.Array
+
+    @property
+    def finished(self):
+        """t_end reached (not stopped by the attempt budget or a collapsing step)."""
+        return self.status == DONE
 
 
 def film_thickness(disc: Discretisation, z, pressure):
@@ -123,167 +179,341 @@ def displacement(disc: Discretisation, pressure):
     return -disc.influence @ pressure
 
 
-def initial_state(disc: Discretisation, z0) -> State:
-    """Quiescent start: p̄ = w̄ = 0 (Section 2.1)."""
-    zero = jnp.zeros_like(disc.r)
-    h = film_thickness(disc, z0, zero)
-    return State(zero, h, h, z0, z0)
-
-
-def _linear_step(disc: Discretisation, beta, state: State, coeffs: StepCoefficients, z_next):
-    """One linearly implicit step: assemble and solve one (N-1)×(N-1) linear system."""
-    h, h_prev = state.film, state.film_prev
-    # Like eq 19, the mobility is taken from known levels, so the step stays linear.
-    k_face = _face_mobility(disc, state, coeffs.extrapolation)
-    # Face conductances g_{i+1/2} = β r k / Δr; the flux operator T is tridiagonal with
-    # (Tp)_i = g_{i+1/2}(p_{i+1} - p_i) - g_{i-1/2}(p_i - p_{i-1}).
-    g = beta * disc.face_r * k_face / disc.face_gap
-    area = disc.cell_area
-    # A (a0 hⁿ⁺¹ + a1 hⁿ + a2 hⁿ⁻¹)/Δt = T pⁿ⁺¹, hⁿ⁺¹ = zⁿ⁺¹ + r²/2 + Ŵ pⁿ⁺¹; unknowns p_0..p_{N-2}.
-    n = disc.r.shape[0] - 1
-    idx = jnp.arange(n)
-    off = jnp.arange(n - 1)
-    diag = g[:n] + jnp.concatenate([jnp.zeros(1, g.dtype), g[: n - 1]])
-    matrix = (coeffs.a0 / coeffs.dt) * disc.area_influence
-    matrix = matrix.at[idx, idx].add(diag)
-    matrix = matrix.at[off, off + 1].add(-g[: n - 1]).at[off + 1, off].add(-g[: n - 1])
-    h_rigid = z_next + 0.5 * disc.r**2
-    known = (coeffs.a0 * h_rigid + coeffs.a1 * h + coeffs.a2 * h_prev) / coeffs.dt
-    p_inner = jnp.linalg.solve(matrix, -(area * known)[:-1])
-    p = jnp.concatenate([p_inner, jnp.zeros(1, p_inner.dtype)])
-    h_next = film_thickness(disc, z_next, p)
-    outflow = -g[-1] * (p[-1] - p[-2])
-    return State(p, h_next, h, z_next, state.gap), (p, h_next, outflow)
-
-
-# A step is accepted when the film stays finite and thins by less than this factor anywhere.
-# The mobility is lagged, so a step much longer than the local drainage time overshoots: in a
-# long hold (t̄ ~ 10⁴, steps ~ 10² t_c) that drives the film at the contact rim negative.
-_MAX_THINNING = 0.1
-_MAX_HALVINGS = 6
-
-
-def _acceptable(new: State, old: State):
-    return jnp.all(jnp.isfinite(new.pressure)) & jnp.all(new.film > _MAX_THINNING * old.film)
-
-
-def step(disc: Discretisation, beta, state: State, coeffs: StepCoefficients, z_next):
-    """One step of the grid: the linearly implicit BDF step, with a positivity safeguard.
-
-    Departure from the paper (which has none; MODEL.md shows its film going negative): if the
-    step would thin the film by more than 10× anywhere (or give NaN), it is redone as 2, 4, 8,
-    ... backward-Euler substeps with z̄ interpolated linearly, until acceptable (at most 2⁶ = 64).
-    The grid and the outputs do not change, so ``vmap`` and ``jvp`` see a fixed step count; in
-    an accepted step (the usual case) this costs one comparison. A step still unacceptable
-    after 64 substeps is returned as is and flagged by the caller's film check.
-    """
-    candidate = _linear_step(disc, beta, state, coeffs, z_next)
-
-    def refine(carry):
-        halvings, _ = carry
-        halvings = halvings + 1
-        count = 2**halvings
-        sub_dt = coeffs.dt / count
-        sub = StepCoefficients(
-            dt=sub_dt,
-            a0=jnp.ones_like(sub_dt),
-            a1=-jnp.ones_like(sub_dt),
-            a2=jnp.zeros_like(sub_dt),
-            extrapolation=jnp.zeros_like(sub_dt),
-        )
-
-        def substep(k, carry_inner):
-            st, _ = carry_inner
-            frac = (k + 1) / count
-            z_k = state.gap + frac * (z_next - state.gap)
-            return _linear_step(disc, beta, st, sub, z_k)
-
-        init = (state, candidate[1])
-        new_state, out = jax.lax.fori_loop(0, count, substep, init)
-        # Keep the BDF history at grid nodes: the previous level is the start of the step.
-        new_state = new_state._replace(film_prev=state.film, gap_prev=state.gap)
-        return halvings, (new_state, out)
-
-    def rejected(carry):
-        halvings, (new_state, _) = carry
-        # A state that is already NaN (bad input) cannot be rescued: do not retry it.
-        retry = ~_acceptable(new_state, state) & jnp.all(jnp.isfinite(state.film))
-        return retry & (halvings < _MAX_HALVINGS)
-
-    _, result = jax.lax.while_loop(rejected, refine, (jnp.zeros((), jnp.int32), candidate))
-    return result
-
-
 def _film_at_midpoints(disc: Discretisation, film, z):
     """h̄ at the cell midpoints: the rigid part z̄ + r̄²/2 exactly, the elastic part interpolated."""
     elastic = film - z - 0.5 * disc.r**2
     return z + 0.5 * disc.face_r**2 + 0.5 * (elastic[:-1] + elastic[1:])
 
 
-def _extrapolate(h, h_prev, extrapolation):
+def _extrapolate_film(h, h_prev, omega):
     """Geometric extrapolation h* = h (h/h_prev)^ω; falls back to h where either is not positive."""
     positive = (h > 0) & (h_prev > 0)
     ratio = jnp.where(positive, h / jnp.where(positive, h_prev, 1.0), 1.0)
-    return h * ratio**extrapolation
+    return h * ratio**omega
 
 
-def _face_mobility(disc: Discretisation, state: State, extrapolation):
+def face_mobility(disc: Discretisation, film, film_prev, gap, gap_prev, omega):
     """Mobility of each cell [r̄_i, r̄_{i+1}]: the harmonic mean of h̄³ by Simpson's rule,
-    1/k = (1/h̄_i³ + 4/h̄_m³ + 1/h̄_{i+1}³)/6.
+    1/k = (1/h̄_i³ + 4/h̄_m³ + 1/h̄_{i+1}³)/6, of the extrapolated film.
 
     Why harmonic, and why with the nodes: with a constant flux across the cell, Δp̄ scales with
     ∫ dr̄/h̄³, so the conductance is a harmonic mean. The arithmetic mean of nodal h̄³ overestimates
     it by ~(3Δh̄/h̄)²/8 — 2 % per cell on the geometric outer mesh where h̄ ~ r̄², which dominated
     the far-field force error. Including the nodes makes a face close as either node's film
-    closes, as the continuous equation does (∂h̄/∂t̄ → 0 where h̄ → 0): the semi-discrete scheme then
-    keeps the film positive, which the paper's lagged nodal m³ does not (MODEL.md).
+    closes, as the continuous equation does (∂h̄/∂t̄ → 0 where h̄ → 0).
     """
-    h = _extrapolate(state.film, state.film_prev, extrapolation)
-    h_mid = _extrapolate(
-        _film_at_midpoints(disc, state.film, state.gap),
-        _film_at_midpoints(disc, state.film_prev, state.gap_prev),
-        extrapolation,
+    h = _extrapolate_film(film, film_prev, omega)
+    h_mid = _extrapolate_film(
+        _film_at_midpoints(disc, film, gap), _film_at_midpoints(disc, film_prev, gap_prev), omega
     )
     inv_k = 1.0 / h**3
     inv_mid = 1.0 / h_mid**3
     return 6.0 / (inv_k[:-1] + 4.0 * inv_mid + inv_k[1:])
 
 
+def linear_step(disc: Discretisation, beta, k_face, dt, a0, known_gap, known_pressure, z_next):
+    """Solve A (a0 h̄ⁿ⁺¹ + a1 h̄ⁿ + a2 h̄ⁿ⁻¹)/Δt = β T(k) p̄ⁿ⁺¹ for p̄ⁿ⁺¹, h̄ = z̄ + r̄²/2 + Ŵp̄.
+
+    ``known_gap`` = a1 z̄ⁿ + a2 z̄ⁿ⁻¹ and ``known_pressure`` = a1 p̄ⁿ + a2 p̄ⁿ⁻¹. Since
+    a0 + a1 + a2 = 0 the r̄²/2 terms cancel exactly, so the right-hand side is assembled from the
+    gap rate and the elastic part alone: no O(1) film values cancel, and a decaying pressure
+    (F̄ → 10⁻¹⁰⁰ in a long hold at z̄0 > 1) keeps its relative accuracy and its sign.
+    The flux operator T is tridiagonal with face conductances g_{i+1/2} = β r̄ k/Δr̄:
+    (Tp̄)_i = g_{i+1/2}(p̄_{i+1} - p̄_i) - g_{i-1/2}(p̄_i - p̄_{i-1}).
+    Unknowns p̄_0..p̄_{N-2}; p̄_{N-1} = 0 (eq 22b). Returns (p̄ⁿ⁺¹, h̄ⁿ⁺¹, outflow).
+    """
+    g = beta * disc.face_r * k_face / disc.face_gap
+    n = disc.r.shape[0] - 1
+    idx = jnp.arange(n)
+    off = jnp.arange(n - 1)
+    diag = g[:n] + jnp.concatenate([jnp.zeros(1, g.dtype), g[: n - 1]])
+    matrix = (a0 / dt) * disc.area_influence
+    matrix = matrix.at[idx, idx].add(diag)
+    matrix = matrix.at[off, off + 1].add(-g[: n - 1]).at[off + 1, off].add(-g[: n - 1])
+    rate = (a0 * z_next + known_gap) + disc.influence @ known_pressure
+    rhs = -(disc.cell_area * rate / dt)[:-1]
+    p_inner = jnp.linalg.solve(matrix, rhs)
+    p = jnp.concatenate([p_inner, jnp.zeros(1, p_inner.dtype)])
+    h_next = film_thickness(disc, z_next, p)
+    outflow = -g[-1] * (p[-1] - p[-2])
+    return p, h_next, outflow
+
+
+def _bdf_coefficients(order, omega):
+    """Variable-step BDF2 (order 2, ω = Δtₙ/Δtₙ₋₁) or backward Euler (order 1)."""
+    a0 = jnp.where(order == 2, (1 + 2 * omega) / (1 + omega), 1.0)
+    a1 = jnp.where(order == 2, -(1 + omega), -1.0)
+    a2 = jnp.where(order == 2, omega**2 / (1 + omega), 0.0)
+    return a0, a1, a2
+
+
+def _next_breakpoint(breakpoints, t, t_end):
+    """The first velocity jump after t (or t_end)."""
+    later = jnp.where(breakpoints > t, breakpoints, jnp.inf)
+    return jnp.minimum(jnp.min(later, initial=jnp.inf), t_end)
+
+
+def _interpolate(t_query, t0, t1, t2, y0, y1, y2, linear):
+    """The step's interpolant through (t0, y0), (t1, y1), (t2, y2) at t_query ∈ [t1, t2]:
+    quadratic (BDF2's own dense output), or linear through the last two for a BE step."""
+    lin = y1 + (t_query - t1) / (t2 - t1) * (y2 - y1)
+    # Where linear, t0 may coincide with t1: move it so no branch divides by zero (a NaN in the
+    # unselected branch would still poison reverse-mode gradients).
+    t0 = jnp.where(linear, 2.0 * t1 - t2, t0)
+    l0 = (t_query - t1) * (t_query - t2) / ((t0 - t1) * (t0 - t2))
+    l1 = (t_query - t0) * (t_query - t2) / ((t1 - t0) * (t1 - t2))
+    l2 = (t_query - t0) * (t_query - t1) / ((t2 - t0) * (t2 - t1))
+    quad = l0 * y0 + l1 * y1 + l2 * y2
+    return jnp.where(linear, lin, quad)
+
+
+def _initial_state(disc, beta, z0, t_start, tol: Tolerance, profile_times) -> State:
+    zero = jnp.zeros_like(disc.r)
+    h = film_thickness(disc, z0, zero)
+    dtype = disc.r.dtype
+    scalar = functools.partial(jnp.asarray, dtype=dtype)
+    integer = functools.partial(jnp.asarray, dtype=jnp.int32)
+    return State(
+        t=scalar(t_start),
+        dt_prev=scalar(1.0),
+        dt_prev2=scalar(1.0),
+        pressure=zero,
+        pressure_prev=zero,
+        film=h,
+        film_prev=h,
+        film_prev2=h,
+        gap=scalar(z0),
+        gap_prev=scalar(z0),
+        force=scalar(0.0),
+        force_prev=scalar(0.0),
+        force_prev2=scalar(0.0),
+        force_peak=scalar(0.0),
+        since_restart=integer(0),
+        dt_next=jax.lax.stop_gradient(tol.initial_step / jnp.maximum(1.0, beta)),
+        error_prev=scalar(1.0),
+        last_rejected=jnp.asarray(False),
+        accepted=integer(0),
+        rejected=integer(0),
+        status=integer(RUNNING),
+        entry=integer(0),
+        entry_prev=integer(0),
+        profiles=jnp.zeros((profile_times.shape[0], disc.r.shape[0]), dtype),
+    )
+
+
+def _entry_of(state: State, outflow, accepted, linear, stencil) -> Step:
+    return Step(
+        t=state.t,
+        force=state.force,
+        film_center=state.film[0],
+        film_min=jnp.min(state.film),
+        outflow=outflow,
+        accepted=accepted,
+        stencil=stencil,
+        linear=linear,
+    )
+
+
+def _attempt(disc, beta, z0, history, t_end, tol: Tolerance, profile_times, state: State, k):
+    """Attempt one step from ``state``; returns the new state and output entry ``k + 1``."""
+    t = state.t
+    target = _next_breakpoint(history.breakpoints_array(), t, t_end)
+    lands = state.dt_next >= target - t
+    t_new = jnp.where(lands, target, t + state.dt_next)
+    dt = t_new - t
+    dt1, dt2 = state.dt_prev, state.dt_prev2
+
+    # Segment start (since_restart = 0): backward Euler, lagged mobility, no estimate yet.
+    # Second step: backward Euler paired with linear extrapolation. Then BDF2 with quadratic.
+    order = jnp.where((state.since_restart >= 2) & (tol.order == 2), 2, 1)
+    omega = jnp.where(order == 2, dt / dt1, 0.0)
+    a0, a1, a2 = _bdf_coefficients(order, omega)
+    k_face = face_mobility(disc, state.film, state.film_prev, state.gap, state.gap_prev, omega)
+    z_new = z0 - history.travel(t_new)
+    known_gap = a1 * state.gap + a2 * state.gap_prev
+    known_pressure = a1 * state.pressure + a2 * state.pressure_prev
+    p, h, outflow = linear_step(disc, beta, k_face, dt, a0, known_gap, known_pressure, z_new)
+    force = disc.force_weights @ p
+
+    # Embedded error estimate (Milne's device) on the film at every node and on the force.
+    factor = ctrl.milne_factor(order, dt, dt1, dt2, a0, a1, a2)
+    h_pred = ctrl.extrapolate(order, dt, dt1, dt2, state.film, state.film_prev, state.film_prev2)
+    f_pred = ctrl.extrapolate(
+        order, dt, dt1, dt2, state.force, state.force_prev, state.force_prev2
+    )
+    scale_h = tol.atol + tol.rtol * jnp.maximum(jnp.abs(h), jnp.abs(state.film))
+    scale_f = tol.atol + tol.rtol * jnp.maximum(jnp.abs(force), jnp.abs(state.force))
+    error = jnp.maximum(
+        jnp.max(jnp.abs(factor * (h - h_pred)) / scale_h),
+        jnp.abs(factor * (force - f_pred)) / scale_f,
+    )
+    error = jnp.where(state.since_restart == 0, 0.0, error)
+    # Positivity is part of acceptance: a step that thins the film through zero (or gives NaN)
+    # is retried shorter. So is a negative force (beyond roundoff of the peak): under a
+    # prescribed approach or hold the film is only squeezed and its pressure pushes back (no
+    # cavitation model). BDF2 would otherwise overshoot a fast-decaying force below zero.
+    roundoff = 1e-13 * jnp.maximum(state.force_peak, jnp.abs(force))
+    valid = jnp.all(jnp.isfinite(p)) & jnp.all(h > 0) & (force >= -roundoff)
+    valid = valid & jnp.isfinite(error)
+    accept = valid & (error <= 1.0)
+
+    step_factor = ctrl.next_step_factor(
+        accept, valid, error, state.error_prev, order, state.last_rejected
+    )
+    # A segment's first step has no estimate: grow by the largest allowed ratio.
+    step_factor = jnp.where(state.since_restart == 0, ctrl.MAX_GROWTH, step_factor)
+    dt_next = dt * step_factor
+    restart = accept & lands & (t_new < t_end)
+    dt_next = jnp.where(restart, tol.initial_step / jnp.maximum(1.0, beta), dt_next)
+    # The step sizes are not differentiated (like diffrax's controllers): derivatives are those
+    # of the discrete solution on the steps taken. Differentiating the controller's choices
+    # adds nothing accurate (those terms are O(tolerance)) and is unstable: the error estimate
+    # jumps where a measured travel history has kinks, and its tangent grew to 1e20.
+    dt_next = jax.lax.stop_gradient(dt_next)
+    # Floor relative to t: below it the step no longer changes t in float64.
+    too_small = ~accept & (dt_next < 1e-12 * jnp.maximum(1.0, jnp.abs(t)))
+
+    # Profiles requested in (t_n, t_{n+1}]: the step's interpolant of p̄.
+    linear = order == 1
+    in_step = accept & (profile_times > t) & (profile_times <= t_new)
+    p_at = jax.vmap(
+        lambda tq: _interpolate(
+            tq, t - dt1, t, t_new, state.pressure_prev, state.pressure, p, linear
+        )
+    )(profile_times)
+    profiles = jnp.where(in_step[:, None], p_at, state.profiles)
+
+    entry = k + 1
+    new = State(
+        t=t_new,
+        dt_prev=dt,
+        dt_prev2=dt1,
+        pressure=p,
+        pressure_prev=state.pressure,
+        film=h,
+        film_prev=state.film,
+        film_prev2=state.film_prev,
+        gap=z_new,
+        gap_prev=state.gap,
+        force=force,
+        force_prev=state.force,
+        force_prev2=state.force_prev,
+        force_peak=jnp.maximum(state.force_peak, force),
+        since_restart=jnp.where(restart, 0, state.since_restart + 1),
+        dt_next=dt_next,
+        error_prev=jnp.maximum(error, 1e-4),
+        last_rejected=jnp.asarray(False),
+        accepted=state.accepted + 1,
+        rejected=state.rejected,
+        status=jnp.where(t_new >= t_end, DONE, RUNNING),
+        entry=jnp.asarray(entry, jnp.int32),
+        entry_prev=state.entry,
+        profiles=profiles,
+    )
+    kept = state._replace(
+        dt_next=dt_next,
+        last_rejected=jnp.asarray(True),
+        rejected=state.rejected + 1,
+        status=jnp.where(too_small, STEP_TOO_SMALL, state.status),
+    )
+    out_state = jax.tree_util.tree_map(lambda a, b: jnp.where(accept, a, b), new, kept)
+    stencil = jnp.stack([state.entry_prev, state.entry])
+    out = _entry_of(out_state, jnp.where(accept, outflow, 0.0), accept, linear & accept, stencil)
+    return out_state, out
+
+
+def _idle(state: State, k):
+    """An attempt after the run ended: nothing changes."""
+    stencil = jnp.stack([state.entry_prev, state.entry])
+    no = jnp.asarray(False)
+    return state, _entry_of(state, jnp.zeros_like(state.t), no, no, stencil)
+
+
 def rollout(
     disc: Discretisation,
     beta,
     z0,
-    travel,
-    coeffs: StepCoefficients,
+    history,
+    t_end,
+    tol: Tolerance = DEFAULT_TOLERANCE,
+    profile_times=None,
     *,
-    save_profiles: bool = False,
-):
-    """Integrate from rest over the grid: ``travel`` holds d̄ at every grid node (z̄ = z̄0 - d̄).
+    mode: str = "forward",
+) -> Trajectory:
+    """Integrate a run from rest to ``t_end`` with error control.
 
-    Pure and jit/vmap/jvp-compatible in ``beta``, ``z0`` and ``travel``. Returns StepOutput with
-    a leading axis over the grid nodes (node 0 = the initial state).
+    Pure and jit/vmap/jvp-compatible in ``beta``, ``z0``, ``t_end`` and the arrays of ``history``
+    (any object with ``travel(t)``, ``breakpoints_array()`` and ``t_start``, e.g. ``RampHold``
+    or ``SampledTravel``: both are pytrees). ``mode="reverse"`` also supports vjp / ``jax.grad``
+    (a checkpointed scan over ``tol.max_steps`` attempts). Read values at any times with
+    :func:`evaluate`.
     """
-    z = z0 - travel
-    state0 = initial_state(disc, z[0])
-
-    def body(state, xs):
-        c, z_next = xs
-        new, (p, h, outflow) = step(disc, beta, state, c, z_next)
-        out = StepOutput(
-            force=disc.force_weights @ p,
-            film_min=jnp.min(h),
-            film_center=h[0],
-            outflow=outflow,
-            pressure=p if save_profiles else None,
-        )
-        return new, out
-
-    _, outs = jax.lax.scan(body, state0, (coeffs, z[1:]))
-    first = StepOutput(
-        force=jnp.zeros((), z.dtype),
-        film_min=jnp.min(state0.film),
-        film_center=state0.film[0],
-        outflow=jnp.zeros((), z.dtype),
-        pressure=state0.pressure if save_profiles else None,
+    if mode not in ("forward", "reverse"):
+        raise ValueError(f"mode must be 'forward' or 'reverse', got {mode!r}")
+    if tol.order not in (1, 2):
+        raise ValueError(f"order must be 1 (backward Euler) or 2 (BDF2), got {tol.order}")
+    dtype = disc.r.dtype
+    profile_times = (
+        jnp.zeros((0,), dtype) if profile_times is None else jnp.asarray(profile_times, dtype)
     )
-    return jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), first, outs)
+    state0 = _initial_state(disc, beta, z0, history.t_start, tol, profile_times)
+    first = _entry_of(
+        state0, jnp.zeros((), dtype), jnp.asarray(True), jnp.asarray(False), jnp.zeros(2, jnp.int32)
+    )
+    attempt = functools.partial(_attempt, disc, beta, z0, history, t_end, tol, profile_times)
+
+    def body(state, k):
+        return jax.lax.cond(state.status == RUNNING, attempt, _idle, state, k)
+
+    n = tol.max_steps
+    if mode == "reverse":
+        final, entries = jax.lax.scan(jax.checkpoint(body), state0, jnp.arange(n))
+        steps = jax.tree_util.tree_map(
+            lambda a, b: jnp.concatenate([a[None], b]), first, entries
+        )
+    else:
+        # Unwritten entries: t = +inf and NaN values, so a read past the end of an unfinished
+        # run gives NaN rather than a stale value.
+        def blank(a):
+            fill = jnp.inf if a is first.t else (np.nan if a.dtype == dtype else 0)
+            return jnp.full((n + 1, *a.shape), fill, a.dtype).at[0].set(a)
+
+        buffers = Step(*(blank(a) for a in first))
+
+        def loop_body(carry):
+            state, k, buf = carry
+            state, entry = attempt(state, k)
+            buf = jax.tree_util.tree_map(lambda b, e: b.at[k + 1].set(e), buf, entry)
+            return state, k + 1, buf
+
+        def running(carry):
+            state, k, _ = carry
+            return (state.status == RUNNING) & (k < n)
+
+        final, _, steps = jax.lax.while_loop(running, loop_body, (state0, jnp.int32(0), buffers))
+    return Trajectory(
+        steps=steps,
+        profiles=final.profiles,
+        status=final.status,
+        accepted=final.accepted,
+        rejected=final.rejected,
+        t_final=final.t,
+    )
+
+
+def evaluate(steps: Step, times, field: str = "force"):
+    """``field`` of the run at ``times`` by the stepper's own interpolant (quadratic for BDF2
+    steps, linear for backward-Euler ones). Times past the end of the run give NaN; before the
+    start, the initial value. Differentiable, vmappable; independent of which times are asked.
+    """
+    values = getattr(steps, field)
+    times = jnp.asarray(times, values.dtype)
+    k = jnp.clip(jnp.searchsorted(steps.t, times, side="left"), 0, steps.t.shape[0] - 1)
+    i0, i1 = steps.stencil[k, 0], steps.stencil[k, 1]
+    t0, t1, t2 = steps.t[i0], steps.t[i1], steps.t[k]
+    y0, y1, y2 = values[i0], values[i1], values[k]
+    linear = steps.linear[k] | (i0 == i1)
+    at = _interpolate(times, t0, t1, t2, y0, y1, y2, linear)
+    at = jnp.where(k == 0, values[0], at)
+    # An unfinished scan run repeats its last level: nothing is known past it.
+    return jnp.where(times > steps.t[-1], jnp.nan, at)

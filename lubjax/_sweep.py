@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+import functools
 import time
 from typing import NamedTuple
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from ._indenter import RampHold, SampledTravel
-from ._solve import Settings, _check_x64, make_plan
-from ._stepper import rollout
+from ._solve import BETA_RANGE, Z0_RANGE, Settings, _check_x64, make_plan
+from ._stepper import DONE, evaluate, rollout
+from ._threads import single_threaded_blas
 
 
 class SweepResult(NamedTuple):
@@ -18,35 +21,54 @@ class SweepResult(NamedTuple):
 
     beta: np.ndarray  # (B,)
     z0: np.ndarray  # (B,)
-    t: np.ndarray  # (T,) shared time grid
-    force: np.ndarray  # (B, T)
+    t: np.ndarray  # (T,) output times (shared)
+    force: np.ndarray  # (B, T), by each run's own interpolant
     film_min: np.ndarray  # (B, T)
-    ok: np.ndarray  # (B,) finite and positive film throughout
+    ok: np.ndarray  # (B,) finished, finite and positive film throughout
+    steps: np.ndarray  # (B,) accepted steps of each run
     compile_s: float
     run_s: float
     devices: int
 
 
-def _one(disc, coeffs, travel, b, z):
-    out = rollout(disc, b, z, travel, coeffs)
-    return out.force, out.film_min
+def _one(tol, disc, history, t_end, times, b, z):
+    traj = rollout(disc, b, z, history, t_end, tol, mode="forward")
+    keep = traj.steps.accepted
+    positive = jnp.all(jnp.where(keep, traj.steps.film_min > 0, True))
+    ok = (traj.status == DONE) & positive
+    return (
+        evaluate(traj.steps, times, "force"),
+        evaluate(traj.steps, times, "film_min"),
+        ok,
+        traj.accepted,
+    )
 
 
 # Sharding: the batch is split into one chunk per device and each chunk runs the same
 # single-device jit(vmap(rollout)) with its inputs committed to that device. No SPMD
 # partitioning, so no cross-device step: an SPMD version (jit with NamedSharding, or shard_map)
 # hung on forced host devices.
-_batched = jax.jit(jax.vmap(_one, in_axes=(None, None, None, 0, 0)))
+@functools.lru_cache(maxsize=8)
+def _batched(tol):
+    one = functools.partial(_one, tol)
+    return jax.jit(jax.vmap(one, in_axes=(None, None, None, None, 0, 0)))
+
+
+
 _COMPILED: dict = {}
 
 
-def _compiled_for(args, device):
-    """AOT-compile once per (device, mesh size, step count, chunk size); returns (fn, seconds)."""
-    key = (device.id, args[0].r.shape[0], args[2].shape[0], args[3].shape[0])
+def _compiled_for(tol, args, device):
+    """AOT-compile once per (device, mesh size, history, output count, tolerance, chunk size);
+    returns (fn, seconds)."""
+    disc, history, _, times, b, _ = args
+    leaves, treedef = jax.tree_util.tree_flatten(history)
+    shapes = tuple(np.shape(x) for x in leaves)
+    key = (device.id, disc.r.shape[0], treedef, shapes, times.shape[0], tol, b.shape[0])
     if key in _COMPILED:
         return _COMPILED[key], 0.0
     start = time.perf_counter()
-    _COMPILED[key] = _batched.lower(*args).compile()
+    _COMPILED[key] = _batched(tol).lower(*args).compile()
     return _COMPILED[key], time.perf_counter() - start
 
 
@@ -58,13 +80,16 @@ def sweep(
     history: RampHold | SampledTravel | None = None,
     settings: Settings | None = None,
     devices: int | None = None,
+    times=None,
 ) -> SweepResult:
     """Run relaxation tests for all (β, z̄0) pairs (arrays broadcast together) in one compiled call.
 
-    All runs share one mesh and one time grid (the default grid resolves the fast time 1/β of any
-    β ≲ 10⁵ after a velocity jump). The batch is padded to a multiple of the device count and
-    split across ``devices`` (default: all of ``jax.devices()``). Failed runs are flagged in
-    ``ok`` rather than raised, so one bad corner does not discard a map.
+    All runs share one mesh; each takes its own error-controlled steps (``vmap`` of a
+    ``while_loop``: the batch runs until its slowest member is done) and reports F̄ and min h̄
+    at the shared output ``times`` (default 501 equally spaced) by its own interpolant. The
+    batch is padded to a multiple of the device count and split across ``devices`` (default:
+    all of ``jax.devices()``). Failed runs are flagged in ``ok`` rather than raised, so one bad
+    corner does not discard a map.
 
     Example: a regime map over a grid, ``B, Z = np.meshgrid(betas, z0s); sweep(B, Z)``, then
     ``res.force.reshape(*B.shape, -1)``.
@@ -74,19 +99,21 @@ def sweep(
     b, z = b.ravel(), z.ravel()
     if b.size == 0:
         raise ValueError("sweep needs at least one (beta, z0) pair")
-    for name, v in (("beta", b), ("z0", z)):
-        if not np.all(np.isfinite(v) & (v > 0)):
-            bad = v[~(np.isfinite(v) & (v > 0))][:3]
-            raise ValueError(f"{name} values must be finite and > 0, got {bad}")
+    for name, v, (lo, hi) in (("beta", b, BETA_RANGE), ("z0", z, Z0_RANGE)):
+        good = np.isfinite(v) & (v >= lo) & (v <= hi)
+        if not np.all(good):
+            raise ValueError(
+                f"{name} values must be finite and in [{lo:g}, {hi:g}], got {v[~good][:3]}"
+            )
     n_dev = len(jax.devices()) if devices is None else int(devices)
     if not 1 <= n_dev <= len(jax.devices()):
         raise ValueError(f"devices must be in [1, {len(jax.devices())}], got {devices}")
-    plan = make_plan(t_end, history=history, settings=settings)
+    plan = make_plan(t_end, history=history, settings=settings, times=times)
     pad = (-b.size) % n_dev
     bp = np.concatenate([b, np.full(pad, b[-1])])
     zp = np.concatenate([z, np.full(pad, z[-1])])
     chunk = bp.size // n_dev
-    shared = (plan.disc, plan.coeffs, plan.travel)
+    shared = (plan.disc, plan.history, plan.t_end, plan.t)
     used = jax.devices()[:n_dev]
     per_device = [
         jax.device_put((*shared, bp[k * chunk:(k + 1) * chunk], zp[k * chunk:(k + 1) * chunk]), d)
@@ -94,7 +121,7 @@ def sweep(
     ]
     # One executable per device (each is bound to its device's inputs), cached across calls;
     # compile time reported apart (0 when cached).
-    compiled_and_time = [_compiled_for(args, d) for args, d in zip(per_device, used)]
+    compiled_and_time = [_compiled_for(plan.tol, args, d) for args, d in zip(per_device, used)]
     compiled = [fn for fn, _ in compiled_and_time]
     compile_s = sum(s for _, s in compiled_and_time)
     start = time.perf_counter()
@@ -103,13 +130,15 @@ def sweep(
     # (OPENBLAS_NUM_THREADS=1) deadlocked, so on CPU the chunks run one after another.
     on_cpu = jax.devices()[0].platform == "cpu"
     outs = []
-    for fn, args in zip(compiled, per_device):
-        outs.append(fn(*args))
-        if on_cpu:
-            jax.block_until_ready(outs[-1])
-    outs = jax.block_until_ready(outs)
+    with single_threaded_blas():
+        for fn, args in zip(compiled, per_device):
+            outs.append(fn(*args))
+            if on_cpu:
+                jax.block_until_ready(outs[-1])
+        outs = jax.block_until_ready(outs)
     run_s = time.perf_counter() - start
-    force = np.concatenate([np.asarray(o[0]) for o in outs])[: b.size]
-    film_min = np.concatenate([np.asarray(o[1]) for o in outs])[: b.size]
-    ok = np.all(np.isfinite(force), axis=1) & np.all(film_min > 0, axis=1)
-    return SweepResult(b, z, plan.t, force, film_min, ok, compile_s, run_s, n_dev)
+    force, film_min, ok, steps = (
+        np.concatenate([np.asarray(o[i]) for o in outs])[: b.size] for i in range(4)
+    )
+    ok = ok & np.all(np.isfinite(force), axis=1)
+    return SweepResult(b, z, plan.t, force, film_min, ok, steps, compile_s, run_s, n_dev)

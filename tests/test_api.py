@@ -84,26 +84,24 @@ def test_refuses_float32():
         jax.config.update("jax_enable_x64", True)
 
 
-def test_negative_film_is_raised_or_flagged():
-    """A deliberately coarse, stiff run (25 % cells, Δt̄ = 0.5, backward Euler, β = 10⁶): the film
-    goes negative even after the step safeguard's 64 substeps, and that must not pass quietly."""
-    bad = lubjax.Settings(dr=0.25, r_fine=1.0, length=10.0, mesh_growth=1.5, dt=0.5,
-                          dt_min=0.5, time_growth=1.5, order=1)
-    res = lubjax.relax(1e6, 0.05, t_end=3.0, settings=bad, check="flag")
-    assert not res.film_positive and not res.ok
-    assert "negative" in res.problems()[0]
-    with pytest.raises(lubjax.SolverError, match="film went negative"):
-        lubjax.relax(1e6, 0.05, t_end=3.0, settings=bad)
-    with pytest.warns(RuntimeWarning, match="negative"):
-        lubjax.relax(1e6, 0.05, t_end=3.0, settings=bad, check="warn")
-
-
-def test_nan_is_flagged():
-    res = lubjax.relax(100.0, 0.5, t_end=0.2, check="flag")
-    assert res.ok
-    plan = lubjax.make_plan(0.2)
-    out = lubjax.rollout(plan.disc, jnp.nan, 0.5, plan.travel, plan.coeffs)
-    assert not np.all(np.isfinite(np.asarray(out.force)))
+def test_bad_times_and_settings_are_clear_errors():
+    for kwargs, match in [
+        (dict(profile_times=[float("nan")]), "profile_times"),
+        (dict(profile_times=[[1.0, 2.0]]), "1-D"),
+        (dict(profile_times=[7.0]), "profile_times"),
+        (dict(t_end=True), "t_end"),
+        (dict(t_end=np.array([1.0, 2.0])), "t_end"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            lubjax.relax(100.0, 0.5, **{"t_end": 5.0, **kwargs})
+    assert lubjax.relax(100.0, 0.5, t_end=np.array(0.2)).t[-1] == 0.2
+    for kwargs, match in [(dict(rtol=0.0), "rtol"), (dict(rtol=0.5), "rtol"),
+                          (dict(order=3), "order"), (dict(max_steps=2.5), "max_steps"),
+                          (dict(dr=-1.0), "dr")]:
+        with pytest.raises(ValueError, match=match):
+            lubjax.Settings(**kwargs)
+    with pytest.raises(ValueError, match=r"beta must be finite and in \[0.0001, 1e\+09\]"):
+        lubjax.relax(1e300, 0.5)
 
 
 def test_sampled_history_matches_ideal_ramp():
@@ -113,8 +111,7 @@ def test_sampled_history_matches_ideal_ramp():
     assert sampled.breakpoints == pytest.approx((0.0, 1.0), abs=2e-3)
     a = lubjax.relax(100.0, 1.0, t_end=3.0)
     b = lubjax.relax(100.0, 1.0, t_end=3.0, history=sampled)
-    fa = np.interp(b.t, a.t, a.force)
-    assert np.max(np.abs(fa - b.force)) < 2e-3 * a.force.max()
+    assert np.max(np.abs(a.at(b.t) - b.force)) < 2e-3 * a.force.max()
 
 
 def test_smoothed_start_eq_23():
@@ -128,15 +125,17 @@ def test_smoothed_start_eq_23():
 
 
 def test_vmap_and_forward_gradient_in_beta_and_z0():
-    plan = lubjax.make_plan(1.5, settings=lubjax.Settings(dr=0.05, dt=0.02))
-    f = jax.jit(lambda b, z: lubjax.force_curve(plan, b, z))
+    settings = lubjax.Settings(dr=0.05, mesh_growth=1.1, length=50.0, rtol=1e-7)
+    plan = lubjax.make_plan(1.5, settings=settings, times=np.linspace(0, 1.5, 31))
+    f = jax.jit(lambda b, z: lubjax.force_curve(plan, b, z, mode="forward"))
     betas = jnp.array([50.0, 200.0])
     batched = jax.vmap(f, in_axes=(0, None))(betas, 0.8)
     for k, b in enumerate(betas):
-        # Batched and single LU solves round differently; the systems' condition numbers
-        # (~1e7) amplify that to ~1e-9 relative.
-        assert np.allclose(batched[k], f(b, 0.8), rtol=1e-8, atol=1e-14)
-    jac = jax.jit(jax.jacfwd(lambda p: lubjax.force_curve(plan, p[0], p[1])))
+        # Batched and single LU solves round differently (condition numbers ~1e7: ~1e-9
+        # relative), the error estimates with them, and the step sizes follow: the runs agree
+        # far inside their tolerance (1e-7), not to the last bit.
+        assert np.allclose(batched[k], f(b, 0.8), rtol=1e-6, atol=1e-14)
+    jac = jax.jit(jax.jacfwd(lambda p: f(p[0], p[1])))
     x = jnp.array([100.0, 0.8])
     J = np.asarray(jac(x))
     # The force carries roundoff ~1e-9 relative (condition number ~1e7 times eps), so the step

@@ -10,7 +10,7 @@ import pytest
 
 import lubjax
 
-COARSE = lubjax.Settings(dr=0.05, dt=0.02, mesh_growth=1.1, length=50.0)
+COARSE = lubjax.Settings(dr=0.05, mesh_growth=1.1, length=50.0, error_estimate=False)
 
 
 def test_sweep_matches_single_runs():
@@ -18,7 +18,11 @@ def test_sweep_matches_single_runs():
     assert res.force.shape == (3, res.t.size) and res.ok.all()
     for k in range(3):
         single = lubjax.relax(res.beta[k], res.z0[k], t_end=2.0, settings=COARSE)
-        assert np.allclose(res.force[k], single.force, rtol=1e-8, atol=1e-12 * single.force.max())
+        assert res.steps[k] == single.accepted
+        # Batched LU solves round differently, the error estimates with them, and the step
+        # sizes follow: the runs agree far inside their tolerance, not to the last bit.
+        assert np.allclose(res.force[k], single.at(res.t), rtol=1e-6,
+                           atol=1e-12 * single.force.max())
 
 
 def test_sweep_rejects_bad_values():
@@ -33,7 +37,7 @@ def test_sweep_shards_across_two_host_devices():
         """
         import numpy as np, jax, lubjax
         assert len(jax.devices()) == 2
-        s = lubjax.Settings(dr=0.05, dt=0.02, mesh_growth=1.1, length=50.0)
+        s = lubjax.Settings(dr=0.05, mesh_growth=1.1, length=50.0, error_estimate=False)
         b = np.array([20.0, 200.0, 2000.0])  # odd size: padded to 4
         two = lubjax.sweep(b, 0.8, t_end=1.5, settings=s)
         one = lubjax.sweep(b, 0.8, t_end=1.5, settings=s, devices=1)

@@ -1,0 +1,147 @@
+"""Accuracy of lubjax's defaults against converged runs, pointwise, over a long hold.
+
+    python benchmarks/accuracy.py [--quick] [--rtol 1e-3] [--out benchmarks/out/accuracy.md]
+
+Cases: β ∈ {1, 10, 100, 1000} × z̄0 ∈ {0.5, 0.9, 1, 1.11, 2}, ramp then hold to t̄ = 10³. Every
+run is read at the same output times (500 in [0.01, 5], 200 log-spaced in [5, 10³]) by the
+stepper's own interpolant. The reference is a tight run (rtol 1e-7, atol 1e-16, dr = 0.005, mesh
+growth 1.02, L̄ = 2000); a second tight run (rtol 3e-7, dr = 0.0075, growth 1.03, L̄ = 1000) shows how
+far the reference itself is converged ("ref. change" columns). Reference runs are cached in
+benchmarks/out/cache/ (delete to recompute).
+
+Columns (all maxima over the output times):
+* F/peak: |F̄ - F̄_ref| / max F̄_ref;
+* F pointwise: |F̄/F̄_ref - 1| where F̄_ref > 10⁻⁶ max F̄_ref;
+* h(0): |h̄(0)/h̄_ref(0) - 1|; h_min ≤ 10, h_min > 10: |h̄_min/h̄_min,ref - 1| for t̄ ≤ 10, t̄ > 10;
+* min F/peak: the most negative F̄ relative to the peak (0 if never negative);
+* est./err, est. bounds: Result.force_error against the true error |F̄ - F̄_ref|: the ratio of
+  their maxima (≥ 1: the estimate bounds the worst error) and the fraction of output times with
+  an error above 1e-6 of the peak where the estimate bounds it pointwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import lubjax  # noqa: E402
+from benchmarks.machine import label  # noqa: E402
+
+BETAS = (1.0, 10.0, 100.0, 1000.0)
+Z0S = (0.5, 0.9, 1.0, 1.11, 2.0)
+T_END = 1e3
+T_OUT = np.unique(np.concatenate([np.linspace(0.01, 5.0, 500), np.geomspace(5.0, T_END, 200)]))
+REFERENCE = lubjax.Settings(rtol=1e-7, atol=1e-16, dr=0.005, mesh_growth=1.02, length=2000.0,
+                            max_steps=400_000, error_estimate=False)
+REFERENCE_CHECK = lubjax.Settings(rtol=3e-7, atol=1e-16, dr=0.0075, mesh_growth=1.03,
+                                  length=1000.0, max_steps=400_000, error_estimate=False)
+CACHE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out", "cache")
+FIELDS = ("force", "film_center", "film_min")
+
+
+def run(beta, z0, settings, t_end=T_END, times=T_OUT):
+    res = lubjax.relax(beta, z0, t_end, settings=settings)
+    return {f: res.at(times, f) for f in FIELDS}, res
+
+
+def estimate_quality(out, res, ref):
+    """(max estimate / max error, fraction of output times with an error above 1e-6 of the
+    peak where the estimate, interpolated from the step times, bounds it)."""
+    true = np.abs(out["force"] - ref["force"])
+    est = np.interp(T_OUT, res.t, res.force_error)
+    significant = true > 1e-6 * np.max(ref["force"])
+    ratio = np.max(est) / max(np.max(true), 1e-300)
+    frac = float(np.mean(est[significant] >= true[significant])) if significant.any() else 1.0
+    return ratio, frac
+
+
+def reference(beta, z0, settings, tag):
+    path = os.path.join(CACHE, f"accuracy2_{tag}_b{beta:g}_z{z0:g}.npz")
+    if os.path.exists(path):
+        data = np.load(path)
+        if data["t"].shape == T_OUT.shape and np.allclose(data["t"], T_OUT):
+            return {f: data[f] for f in FIELDS}
+    out, res = run(beta, z0, settings)
+    os.makedirs(CACHE, exist_ok=True)
+    np.savez(path, t=T_OUT, **out)
+    print(f"  reference {tag} β={beta:g} z̄0={z0:g}: {res.accepted} steps, {res.r.size} nodes, "
+          f"{res.run_s:.1f} s", file=sys.stderr)
+    return out
+
+
+def errors(run_out, ref):
+    f, fr = run_out["force"], ref["force"]
+    peak = np.max(np.abs(fr))
+    big = np.abs(fr) > 1e-6 * peak
+    early = T_OUT <= 10
+    hmin = np.abs(run_out["film_min"] / ref["film_min"] - 1)
+    return {
+        "F/peak": np.max(np.abs(f - fr)) / peak,
+        "F pointwise": np.max(np.abs(f[big] / fr[big] - 1)),
+        "h(0)": np.max(np.abs(run_out["film_center"] / ref["film_center"] - 1)),
+        "h_min ≤ 10": np.max(hmin[early]),
+        "h_min > 10": np.max(hmin[~early]),
+        "min F/peak": min(0.0, np.min(f) / peak),
+    }
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="β ∈ {10, 1000}, z̄0 ∈ {0.5, 1.11}")
+    ap.add_argument("--rtol", type=float, default=None, help="tolerance of the runs checked")
+    ap.add_argument("--out", default="benchmarks/out/accuracy.md")
+    ap.add_argument("--betas", type=float, nargs="*", default=None)
+    ap.add_argument("--z0s", type=float, nargs="*", default=None)
+    args = ap.parse_args(argv)
+    betas, z0s = ((10.0, 1000.0), (0.5, 1.11)) if args.quick else (BETAS, Z0S)
+    betas = args.betas or betas
+    z0s = args.z0s or z0s
+    settings = lubjax.Settings() if args.rtol is None else lubjax.Settings(rtol=args.rtol)
+    rows = []
+    for beta in betas:
+        for z0 in z0s:
+            ref = reference(beta, z0, REFERENCE, "ref")
+            check = reference(beta, z0, REFERENCE_CHECK, "check")
+            out, res = run(beta, z0, settings)
+            row = {"beta": beta, "z0": z0, **errors(out, ref)}
+            ref_change = errors(check, ref)
+            row["ref. change F pointwise"] = ref_change["F pointwise"]
+            row["ref. change h_min"] = max(ref_change["h_min ≤ 10"], ref_change["h_min > 10"])
+            row["est./err"], row["est. bounds"] = estimate_quality(out, res, ref)
+            row.update(steps=res.accepted, rejected=res.rejected, nodes=res.r.size,
+                       run_s=res.run_s)
+            rows.append(row)
+            print(f"β={beta:g} z̄0={z0:g}: " + ", ".join(
+                f"{k} {v:.2e}" for k, v in row.items() if isinstance(v, float)
+                and k not in ("beta", "z0")), file=sys.stderr)
+    keys = list(rows[0])
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    with open(args.out.replace(".md", ".csv"), "w", newline="") as fh:
+        w = csv.DictWriter(fh, keys)
+        w.writeheader()
+        w.writerows(rows)
+    lines = [
+        f"Defaults (Settings(rtol={settings.rtol:g})) against converged runs, t̄ ∈ [0, 10³]; "
+        f"{time.strftime('%Y-%m-%d')}, {label()}.",
+        "",
+        "| " + " | ".join(keys) + " |",
+        "|" + "---|" * len(keys),
+    ]
+    for row in rows:
+        lines.append("| " + " | ".join(
+            f"{row[k]:.2e}" if isinstance(row[k], float) and k not in ("beta", "z0", "run_s")
+            else (f"{row[k]:.2f}" if k == "run_s" else f"{row[k]:g}") for k in keys) + " |")
+    with open(args.out, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,28 @@
+"""Keep the CPU's BLAS/LAPACK single-threaded around the solver's small dense solves.
+
+On CPU, JAX's ``linalg.solve`` calls the LAPACK that scipy ships (OpenBLAS). For the solver's
+(N-1)×(N-1) systems (N ≈ 200-300) threading gains nothing, and when other processes load the
+machine OpenBLAS's spinning threads oversubscribe the cores: the default run then swings from
+0.15 s to tens of seconds (issue "Error control", item 8; ``benchmarks/threads.py`` measures it).
+``threadpoolctl`` (maintained by the scikit-learn developers) limits the threads of the BLAS
+libraries already loaded in this process, for the duration of a call, and restores them after.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+
+
+@functools.lru_cache(maxsize=1)
+def _controller():
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
+
+
+@contextlib.contextmanager
+def single_threaded_blas():
+    """Limit BLAS to one thread inside the block (no-op if no BLAS pool is found)."""
+    with _controller().limit(limits=1, user_api="blas"):
+        yield

@@ -1,0 +1,148 @@
+"""The error-controlled stepper: reverse-mode gradients, outputs at any time, budgets, corners."""
+
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import lubjax
+
+COARSE = dict(dr=0.05, mesh_growth=1.1, length=100.0, error_estimate=False)
+
+
+def test_grad_agrees_with_jacfwd():
+    """jax.grad (checkpointed scan) of a scalar loss of the force curve equals forward mode."""
+    plan = lubjax.make_plan(2.0, settings=lubjax.Settings(**COARSE, max_steps=400),
+                            times=np.linspace(0.1, 2.0, 40))
+    target = jnp.linspace(0.5, 0.1, 40)
+
+    def loss(p):
+        return jnp.sum((lubjax.force_curve(plan, p[0], p[1]) - target) ** 2)
+
+    x = jnp.array([80.0, 0.7])
+    g_rev = np.asarray(jax.jit(jax.grad(loss))(x))
+    g_fwd = np.asarray(jax.jit(jax.jacfwd(loss))(x))
+    assert np.all(np.isfinite(g_rev))
+    np.testing.assert_allclose(g_rev, g_fwd, rtol=1e-6)
+
+
+def test_reverse_and_forward_modes_compute_the_same_run():
+    plan = lubjax.make_plan(1.5, settings=lubjax.Settings(**COARSE, max_steps=400))
+    a = lubjax.force_curve(plan, 50.0, 0.8, mode="reverse")
+    b = lubjax.force_curve(plan, 50.0, 0.8, mode="forward")
+    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
+
+
+def test_gradient_against_central_differences():
+    """The derivative of the discrete solution on its own steps (step sizes are not
+    differentiated) against central differences of the adaptive solution. The adaptive force
+    is smooth in (β, z̄0) only up to its step choices (jumps of order the local error), so ε is
+    sized to that noise, not to eps: ε = 1e-3·|x| at rtol = 1e-9 (truncation ε² ~ 1e-6); what
+    the frozen steps leave out is O(rtol^{2/3}) and the first, unchecked step's error."""
+    settings = lubjax.Settings(rtol=1e-9, **COARSE, max_steps=100_000)
+    plan = lubjax.make_plan(2.0, settings=settings, times=np.linspace(0.2, 2.0, 10))
+    f = jax.jit(lambda p: lubjax.force_curve(plan, p[0], p[1], mode="forward"))
+    x = jnp.array([60.0, 0.9])
+    J = np.asarray(jax.jit(jax.jacfwd(f))(x))
+    for k in range(2):
+        h = 1e-3 * float(x[k])
+        e = jnp.zeros(2).at[k].set(h)
+        fd = (np.asarray(f(x + e)) - np.asarray(f(x - e))) / (2 * h)
+        assert np.max(np.abs(J[:, k] - fd)) < 1e-4 * np.max(np.abs(fd)), k
+
+
+def test_results_do_not_depend_on_requested_times():
+    s = lubjax.Settings(**COARSE)
+    a = lubjax.relax(100.0, 0.7, 3.0, settings=s)
+    b = lubjax.relax(100.0, 0.7, 3.0, settings=s, profile_times=[0.123, 1.0, 2.71])
+    np.testing.assert_array_equal(a.t, b.t)
+    np.testing.assert_array_equal(a.force, b.force)
+    # Profiles are the stepper's interpolant, consistent with the force read at those times.
+    weights = np.asarray(lubjax.force_weights(lubjax.Mesh(tuple(b.r))))
+    np.testing.assert_allclose(b.pressure @ weights, b.at([0.123, 1.0, 2.71]), rtol=1e-12)
+    # Thousands of output times cost no steps.
+    plan = lubjax.make_plan(3.0, settings=s, times=np.linspace(0, 3, 5000))
+    f = np.asarray(lubjax.force_curve(plan, 100.0, 0.7, mode="forward"))
+    np.testing.assert_allclose(f[np.searchsorted(plan.t, a.t[-1])], a.force[-1], rtol=1e-12)
+
+
+def test_velocity_jumps_are_step_boundaries():
+    res = lubjax.relax(100.0, 0.5, 2.0, history=lubjax.RampHold(t_accel=0.2))
+    assert np.any(res.t == 0.0) and np.any(res.t == 1.0) and res.t[0] == -0.2
+
+
+def test_short_run_has_loading_accuracy():
+    """Issue: relax(100, 0.5, t_end=1) used to grow its steps to 0.08 (F̄(1) off by 4.8e-3)."""
+    short = lubjax.relax(100.0, 0.5, 1.0)
+    long = lubjax.relax(100.0, 0.5, 5.0)
+    assert short.force[-1] == pytest.approx(long.at([1.0])[0], rel=1e-3)
+
+
+def test_time_error_converges_at_the_observed_order_in_rtol():
+    """Local error control of a second-order method: global error ∝ rtol^{2/3} (fitted slope);
+    backward Euler throughout: ∝ rtol^{1/2}."""
+    times = np.linspace(0.1, 3.0, 60)
+
+    def force(rtol, order):
+        s = lubjax.Settings(rtol=rtol, order=order, **COARSE, max_steps=200_000)
+        return lubjax.relax(30.0, 0.8, 3.0, settings=s).at(times)
+
+    for order, expected in [(2, 2 / 3), (1, 1 / 2)]:
+        ref = force(1e-9 if order == 2 else 1e-8, order)
+        rtols = np.array([1e-3, 1e-4, 1e-5]) if order == 2 else np.array([1e-2, 1e-3, 1e-4])
+        errs = [np.max(np.abs(force(r, order) - ref)) for r in rtols]
+        slope = np.polyfit(np.log(rtols), np.log(errs), 1)[0]
+        assert abs(slope - expected) < 0.15, (order, slope, errs)
+
+
+def test_step_budget_exhaustion_is_never_silent():
+    s = lubjax.Settings(**COARSE, max_steps=20)
+    with pytest.raises(lubjax.SolverError, match="max_steps"):
+        lubjax.relax(100.0, 0.5, 5.0, settings=s)
+    res = lubjax.relax(100.0, 0.5, 5.0, settings=s, check="flag")
+    assert not res.finished and not res.ok and res.t[-1] < 5.0
+    # The differentiable path: times the run did not reach are NaN, not stale values.
+    reached = res.t[-1]
+    plan = lubjax.make_plan(5.0, settings=s, times=[0.5 * reached, 2 * reached, 4.0])
+    f = np.asarray(lubjax.force_curve(plan, 100.0, 0.5))
+    assert f[0] == pytest.approx(res.at([0.5 * reached])[0], rel=1e-12)
+    assert np.all(np.isnan(f[1:]))
+
+
+def test_nan_parameters_stop_the_run_with_a_status():
+    disc = lubjax.discretise(lubjax.Settings(**COARSE).mesh())
+    traj = lubjax.rollout(disc, jnp.nan, 0.5, lubjax.RampHold(), 1.0)
+    assert not bool(traj.finished)
+    with pytest.raises(ValueError, match="beta"):
+        lubjax.relax(float("nan"), 0.5)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("beta, z0", [(0.1, 0.05), (0.1, 5.0), (1e6, 0.05), (1e6, 5.0)])
+def test_corners_of_the_parameter_box_to_a_million(beta, z0):
+    """β ∈ [10⁻¹, 10⁶] × z̄0 ∈ [0.05, 5] held to t̄ = 10⁶: finite, positive film, non-negative
+    force (to roundoff), and the right end state (Hertz for z̄0 < 1, no force for z̄0 > 1)."""
+    res = lubjax.relax(beta, z0, 1e6, settings=lubjax.Settings(rtol=1e-3, error_estimate=False))
+    assert res.ok and res.accepted < 5000
+    peak = res.force.max()
+    assert res.force.min() >= -1e-13 * peak
+    assert np.all(res.film_min > 0)
+    if z0 < 1:
+        assert res.force[-1] == pytest.approx(lubjax.hertz_force(z0), rel=2e-3)
+    else:
+        assert res.force[-1] < 1e-12 * peak
+
+
+def test_error_estimate_bounds_the_error():
+    """Result.force_error against a much finer, tighter run (a subset of the benchmark's 95 %
+    check, benchmarks/error_estimate.py)."""
+    for beta, z0 in [(10.0, 0.9), (1000.0, 1.11)]:
+        res = lubjax.relax(beta, z0, 5.0)
+        ref = lubjax.relax(beta, z0, 5.0, settings=lubjax.Settings(
+            rtol=1e-6, dr=0.007, mesh_growth=1.02, length=1000.0, error_estimate=False))
+        err = np.abs(res.force - ref.at(res.t))
+        assert np.max(err) <= np.max(res.force_error)
+        peak = ref.force.max()
+        significant = err > 1e-4 * peak
+        assert np.mean(err[significant] <= res.force_error[significant]) >= 0.9
