@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-
 import matplotlib
 
 matplotlib.use("Agg")
@@ -11,10 +9,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ._analytic import hertz_force, rigid_squeeze_force  # noqa: E402
+from ._files import save_figure  # noqa: E402
 
 
 def plot_result(res, path: str, test=None) -> None:
-    """Force and minimum film against time, and the pressure / film profiles."""
+    """Force and minimum film against time, and the pressure / film profiles.
+
+    Written atomically in the format of ``path``'s extension (png, pdf, svg, ...)."""
     fig, ax = plt.subplots(1, 4, figsize=(18, 4))
     t = res.t
     ax[0].plot(t, res.force, "k-", label="lubjax")
@@ -58,6 +59,7 @@ def plot_result(res, path: str, test=None) -> None:
             fontsize=9,
         )
     fig.tight_layout()
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        save_figure(fig, path, dpi=110)
+    finally:
+        plt.close(fig)
