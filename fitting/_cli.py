@@ -2,19 +2,40 @@
 
 Prints one summary line per trace to stdout, a progress line to stderr while it works, writes
 the JSON (one object for one trace, a list for several), optionally a CSV table and the plot(s).
+
+Every output is checked before the traces are read (writable, not an input trace, not another
+output, a known plot format) and written atomically. Every failure is one line on stderr: exit
+status 2 for bad usage or input, 1 for a fit that did not converge or an output that could not
+be written (``--debug`` shows the traceback).
 """
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import os
 import sys
 import time
 
+from lubjax._files import (
+    EXIT_EPILOG,
+    EXIT_FAILED,
+    EXIT_OK,
+    Parser,
+    add_debug_flag,
+    atomic_open,
+    check_distinct_inputs,
+    check_outputs,
+    plot_format,
+    positive_int,
+    run_cli,
+    save_figure,
+)
+
 from ._fit import FitResult, fit_traces, result_to_dict
 from ._io import read_trace
+
+PROG = "lubjax-fit"
 
 
 def _fmt(value, err, unit, scale=1.0):
@@ -36,7 +57,9 @@ def summary_line(res: FitResult) -> str:
 
 
 def plot_fit(res: FitResult, path: str) -> None:
-    """Data and model, residuals, and the fitted values with their 1-σ errors, as a PNG."""
+    """Data and model, residuals, and the fitted values with their 1-σ errors.
+
+    Written atomically in the format of ``path``'s extension (png, pdf, svg, ...)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -88,26 +111,34 @@ def plot_fit(res: FitResult, path: str) -> None:
         lines.append("synthetic truth: " + ",  ".join(truth))
     for i, text in enumerate(lines):
         ax3.text(0.0, 1.0 - 0.27 * i, text, transform=ax3.transAxes, va="top", fontsize=9.5)
-    folder = os.path.dirname(path)
-    if folder:
-        os.makedirs(folder, exist_ok=True)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        save_figure(fig, path, dpi=120, bbox_inches="tight")
+    finally:
+        plt.close(fig)
 
 
-def _plot_path(path: str, res: FitResult, several: bool) -> str:
-    if not several:
-        return path
-    stem, ext = os.path.splitext(path)
-    name = os.path.splitext(os.path.basename(res.name))[0] or "trace"
-    return f"{stem}_{name}{ext or '.png'}"
+def plot_paths(plot: str, traces) -> list[str]:
+    """One plot file per trace: ``plot`` itself for one trace, else ``<stem>_<trace><ext>``.
+
+    Traces with the same file name in different folders are told apart by their path relative
+    to the folder they share (``fits_a_run.png``, ``fits_b_run.png``); should names still clash,
+    they are numbered. No two traces get the same plot file.
+    """
+    if len(traces) == 1:
+        return [plot]
+    stem, ext = os.path.splitext(plot)
+    names = [os.path.splitext(os.path.basename(p))[0] or "trace" for p in traces]
+    if len(set(names)) < len(names):
+        full = [os.path.abspath(p) for p in traces]
+        common = os.path.commonpath([os.path.dirname(p) for p in full])
+        names = [os.path.splitext(os.path.relpath(p, common))[0].replace(os.sep, "_") for p in full]
+    if len(set(names)) < len(names):
+        names = [f"{k}_{name}" for k, name in enumerate(names, start=1)]
+    return [f"{stem}_{name}{ext}" for name in names]
 
 
 def write_table(results, path: str) -> None:
-    """One CSV row per trace with the fitted values, errors and flags."""
-    folder = os.path.dirname(path)
-    if folder:
-        os.makedirs(folder, exist_ok=True)
+    """One CSV row per trace with the fitted values, errors and flags (written atomically)."""
     cols = [
         "trace",
         "E_star_Pa",
@@ -125,7 +156,7 @@ def write_table(results, path: str) -> None:
         "n_iterations",
         "wall_s",
     ]
-    with open(path, "w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(cols)
         for r in results:
@@ -150,19 +181,23 @@ def write_table(results, path: str) -> None:
             )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="lubjax-fit",
+def build_parser() -> Parser:
+    p = Parser(
+        prog=PROG,
         description="Fit the substrate modulus E*, film viscosity eta and initial gap z0 to "
         "relaxation traces (CSV: see data/README.md) with the lubjax soft-EHL solver.",
+        epilog=EXIT_EPILOG.format(
+            failed="a fit did not converge (its results are still written),\n"
+            "     or an output could not be written"
+        ),
     )
     p.add_argument("traces", nargs="+", help="trace CSV file(s)")
     p.add_argument("--out", help="JSON output (one object, or a list for several traces)")
     p.add_argument("--table", help="also write a CSV table, one row per trace")
     p.add_argument(
         "--plot",
-        help="PNG of data, model, residuals and values (one per trace: "
-        "the trace name is appended when there are several)",
+        help="figure of data, model, residuals and values (.png, .pdf, .svg, ...; one per "
+        "trace: the trace name is appended when there are several)",
     )
     p.add_argument(
         "--method",
@@ -171,17 +206,31 @@ def build_parser() -> argparse.ArgumentParser:
         help="optimiser: Levenberg-Marquardt (default) or optax L-BFGS",
     )
     p.add_argument("--no-offset", action="store_true", help="do not fit a constant force offset")
-    p.add_argument("--max-iter", type=int, default=60, help="iteration limit (default 60)")
+    p.add_argument("--max-iter", type=positive_int, default=60, help="iteration limit (default 60)")
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
+    add_debug_flag(p)
     return p
 
 
-def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+def _run(args) -> int:
+    check_distinct_inputs(args.traces, "trace")
+    plots = []
+    if args.plot is not None:
+        if args.plot.strip():
+            plot_format(args.plot)
+        plots = plot_paths(args.plot, args.traces)
+    check_outputs(
+        [("--out", args.out), ("--table", args.table)] + [("--plot", p) for p in plots],
+        inputs=args.traces,
+        input_label="input trace",
+    )
     start = time.perf_counter()
+    shown = False
 
     def progress(msg):
+        nonlocal shown
         if not args.quiet:
+            shown = True
             elapsed = time.perf_counter() - start
             sys.stderr.write(f"\r\033[K[{elapsed:6.1f} s] {msg}"[:200])
             sys.stderr.flush()
@@ -196,35 +245,31 @@ def main(argv=None) -> int:
             max_iter=args.max_iter,
             progress=progress,
         )
-    except ValueError as exc:
-        if not args.quiet:
-            sys.stderr.write("\n")
-        print(f"lubjax-fit: error: {exc}", file=sys.stderr)
-        return 2
-    if not args.quiet:
-        sys.stderr.write("\r\033[K")
-        sys.stderr.flush()
+    finally:
+        if shown:  # clear the progress line: an error message or the summary follows
+            sys.stderr.write("\r\033[K")
+            sys.stderr.flush()
     for res in results:
         print(summary_line(res))
         for flag in res.flags[1:]:
             print(f"  warning: {flag}")
     dicts = [result_to_dict(r) for r in results]
     if args.out:
-        folder = os.path.dirname(args.out)
-        if folder:
-            os.makedirs(folder, exist_ok=True)
-        with open(args.out, "w", encoding="utf-8") as fh:
+        with atomic_open(args.out, "w") as fh:
             json.dump(dicts[0] if len(dicts) == 1 else dicts, fh, indent=2)
         print(f"wrote {args.out}")
     if args.table:
         write_table(results, args.table)
         print(f"wrote {args.table}")
-    if args.plot:
-        for res in results:
-            path = _plot_path(args.plot, res, len(results) > 1)
-            plot_fit(res, path)
-            print(f"wrote {path}")
-    return 0 if all(r.converged for r in results) else 1
+    for res, path in zip(results, plots):
+        plot_fit(res, path)
+        print(f"wrote {path}")
+    return EXIT_OK if all(r.converged for r in results) else EXIT_FAILED
+
+
+def main(argv=None) -> int:
+    """Run ``lubjax-fit`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit status."""
+    return run_cli(PROG, build_parser(), _run, argv)
 
 
 if __name__ == "__main__":
