@@ -23,7 +23,9 @@ mesh for lubjax), so "inaccurate" measures the time stepping, not the domain tru
 times t̄ = 0, 0.1, ..., 5 (nodes of every uniform grid; lubjax is interpolated linearly on its
 own grid).
 
-Writes benchmarks/out/stability_map.csv, stability_map_<method>.png, stability_map.png.
+Writes benchmarks/out/stability_map.csv, stability_map_<method>.png, stability_map.png; --quick
+writes benchmarks/out/quick/stability_map_quick.{csv,png} and its per-method PNGs there, never
+over the full map's.
 """
 
 from __future__ import annotations
@@ -196,9 +198,10 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="3 β × 3 z̄0 × Δt̄ ∈ {1e-2, 1e-1}")
     ap.add_argument("--methods", default=",".join(METHODS), help="comma-separated subset")
-    ap.add_argument("--out", default=str(OUT))
+    ap.add_argument("--out", default=None, help="output folder (default benchmarks/out, "
+                    "benchmarks/out/quick with --quick)")
     args = ap.parse_args(argv)
-    out = Path(args.out)
+    out = Path(args.out) if args.out else (OUT / "quick" if args.quick else OUT)
     out.mkdir(parents=True, exist_ok=True)
     if args.quick:
         betas, z0s, dts = [1e-1, 1e2, 1e5], [0.1, 0.7, 5.0], [1e-2, 1e-1]
