@@ -313,11 +313,10 @@ def parse_trace(text: str, name: str = "<string>") -> Trace:
 
 
 def _decode(data: bytes, name: str) -> str:
-    """UTF-8 text (a leading BOM dropped); TraceError naming the line of the first bad byte."""
+    """UTF-8 text (a leading BOM is kept: parse_trace drops it); TraceError naming the line of
+    the first bad byte."""
     if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
         raise TraceError(f"{name}: line 1: the file is UTF-16 text; save it as UTF-8 (CSV UTF-8)")
-    if data.startswith(codecs.BOM_UTF8):
-        data = data[len(codecs.BOM_UTF8) :]
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
