@@ -28,6 +28,7 @@ from lubjax._files import (
     check_outputs,
     plot_format,
     positive_int,
+    prepare_outputs,
     run_cli,
     save_figure,
 )
@@ -219,11 +220,8 @@ def _run(args) -> int:
         if args.plot.strip():
             plot_format(args.plot)
         plots = plot_paths(args.plot, args.traces)
-    check_outputs(
-        [("--out", args.out), ("--table", args.table)] + [("--plot", p) for p in plots],
-        inputs=args.traces,
-        input_label="input trace",
-    )
+    outputs = [("--out", args.out), ("--table", args.table)] + [("--plot", p) for p in plots]
+    check_outputs(outputs, inputs=args.traces, input_label="input trace")
     start = time.perf_counter()
     shown = False
 
@@ -237,6 +235,7 @@ def _run(args) -> int:
 
     try:
         traces = [read_trace(path) for path in args.traces]
+        prepare_outputs(outputs)  # creates missing folders: only once the inputs are good
         progress(f"read {len(traces)} trace(s); compiling the solver (first call only) ...")
         results = fit_traces(
             traces,

@@ -20,6 +20,7 @@ from ._files import (
     atomic_open,
     check_outputs,
     positive_float,
+    prepare_outputs,
     run_cli,
 )
 
@@ -105,7 +106,8 @@ def _relax(args) -> int:
         raise UsageError("give either --beta/--z0 or SI parameters, not both")
     if not si_given and (args.beta is None or args.z0 is None):
         raise UsageError("give --beta and --z0, or the SI parameters (see lubjax relax --help)")
-    check_outputs([("--out", args.out), ("--plot", args.plot)])
+    outputs = [("--out", args.out), ("--plot", args.plot)]
+    check_outputs(outputs)
     test = _si_test(args) if si_given else None
     beta, z0 = (test.beta, test.z0_bar) if test else (args.beta, args.z0)
     check_parameters(beta, z0)  # the solver's valid ranges, before anything is compiled
@@ -123,6 +125,7 @@ def _relax(args) -> int:
     except TypeError as err:  # a flag this version's Settings does not have
         raise UsageError(f"settings {sorted(overrides)}: {err}") from None
     profile_times = [t for t in (0.25, 0.5, 1.0, 2.0, t_end) if t <= t_end]
+    prepare_outputs(outputs)
     res = relax(beta, z0, t_end, settings=settings, profile_times=profile_times)
     out = {
         "beta": beta,

@@ -1,9 +1,9 @@
 """Safe outputs and one-line errors for the command lines (``lubjax``, ``lubjax-fit``).
 
 * :func:`check_outputs` validates every output path (non-empty, not a folder or a device, a
-  folder that exists or can be created and is writable, a known plot format) and refuses an
-  output that is an input file or another output of the same run (resolved paths, hard links
-  included). The command lines call it *before* any computation.
+  known plot format) and refuses an output that is an input file or another output of the same
+  run (resolved paths, hard links included); :func:`prepare_outputs` then creates the folders
+  and proves they take a new file. The command lines call both *before* any computation.
 * :func:`atomic_open` writes to a temporary file in the target's folder and renames it over the
   target only once everything is written: a failed write leaves the old file as it was.
 * :class:`Parser` and :func:`run_cli` give each failure one line on stderr and an exit status:
@@ -229,8 +229,15 @@ def check_outputs(outputs, inputs=(), input_label="input file") -> None:
                     f"{opt} {path} and {opt2} {path2} are the same file: give each output its "
                     "own name"
                 )
-    for opt, path in given:  # last: the only check with a side effect (creates folders)
-        _probe_folder(opt, path)
+
+
+def prepare_outputs(outputs) -> None:
+    """Create the outputs' missing folders and prove each can take a new file (UsageError if
+    not). Call it after :func:`check_outputs` and the input checks, just before computing: it is
+    the only check with a side effect (the folders it creates)."""
+    for opt, path in outputs:
+        if path is not None:
+            _probe_folder(opt, path)
 
 
 def check_distinct_inputs(inputs, label="input file") -> None:

@@ -118,6 +118,7 @@ RELAX_USAGE = [
     (DIM + ["--poisson", "0.3"], "give either --beta/--z0 or SI parameters, not both"),
     (["relax", "--beta", "100"], "give --beta and --z0, or the SI parameters"),
     (DIM + ["--beta", "1e300"], "beta must be finite and in ["),
+    (DIM + ["--beta", "1e300", "--out", "{tmp}/new/r.json"], "beta must be finite and in ["),
     (DIM + ["--order", "3"], "argument --order: invalid choice"),
     (["relax", "--beta", "x", "--z0", "1"], "argument --beta: invalid float value: 'x'"),
     (["frobnicate"], "invalid choice: 'frobnicate'"),
@@ -310,8 +311,10 @@ def test_fit_refuses_nonsense_traces(text, message, tmp_path, capsys, no_run):
     with pytest.raises(TraceError, match=None) as info:
         read_trace(p)
     assert message in str(info.value) and str(p) in str(info.value)
-    assert fcli.main([str(p), "--quiet"]) == 2
+    out = tmp_path / "new" / "fit.json"
+    assert fcli.main([str(p), "--out", str(out), "--quiet"]) == 2
     assert message in _one_line_error(capsys.readouterr().err, "lubjax-fit")
+    assert os.listdir(tmp_path) == ["bad.csv"]  # no output folder made for a refused input
 
 
 ENCODINGS = [
