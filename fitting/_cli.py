@@ -22,6 +22,7 @@ from lubjax._files import (
     EXIT_FAILED,
     EXIT_OK,
     Parser,
+    UsageError,
     add_debug_flag,
     atomic_open,
     check_distinct_inputs,
@@ -217,8 +218,9 @@ def _run(args) -> int:
     check_distinct_inputs(args.traces, "trace")
     plots = []
     if args.plot is not None:
-        if args.plot.strip():
-            plot_format(args.plot)
+        if not args.plot.strip():
+            raise UsageError("--plot: empty file name")
+        plot_format(args.plot)  # before the per-trace names, so the message shows the user's
         plots = plot_paths(args.plot, args.traces)
     outputs = [("--out", args.out), ("--table", args.table)] + [("--plot", p) for p in plots]
     check_outputs(outputs, inputs=args.traces, input_label="input trace")

@@ -121,8 +121,11 @@ def run_cli(prog: str, parser: argparse.ArgumentParser, body, argv=None) -> int:
     try:
         args = parser.parse_args(argv)
         return body(args)
-    except SystemExit as exc:  # --help, --version
-        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else EXIT_USAGE)
+    except SystemExit as exc:  # --help; sys.exit("message") from below
+        if exc.code is None or isinstance(exc.code, int):
+            return exc.code or EXIT_OK
+        print(f"{prog}: error: {one_line(exc.code)}", file=sys.stderr)
+        return EXIT_USAGE
     except KeyboardInterrupt:
         if debug:
             raise

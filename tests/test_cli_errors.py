@@ -250,6 +250,9 @@ FIT_USAGE = [
     (["{trace}", "--out", ""], "--out: empty file name"),
     (["{trace}", "--table", " "], "--table: empty file name"),
     (["{trace}", "--plot", "{tmp}/figplain"], "has no extension: name the format"),
+    (["{trace}", "{tmp}/hard.csv", "--plot", ""], "is given twice"),
+    (["{trace}", SEED, "--plot", "{tmp}/figplain"], "'{tmp}/figplain' has no extension"),
+    (["{trace}", SEED, "--plot", " "], "--plot: empty file name"),
     (["{trace}", "--plot", "{tmp}/fig.xyz"], "unknown format '.xyz'"),
     (["{trace}", "--plot", "{tmp}/fig.csv"], "unknown format '.csv'"),
     (["{trace}", "--out", "/dev/full"], "exists and is not a regular file"),
@@ -275,7 +278,7 @@ def test_fit_usage_errors_are_one_line_exit_2_before_fitting(
     argv = [a.format(trace=trace, tmp=tmp_path, name=tmp_path.name) for a in argv]
     assert fcli.main(argv + ["--quiet"]) == 2
     line = _one_line_error(capsys.readouterr().err, "lubjax-fit")
-    assert message in line
+    assert message.format(tmp=tmp_path) in line
     assert _digest(trace) == digest  # the user's data is never touched
     assert sorted(os.listdir(tmp_path)) == before
     assert os.path.islink(tmp_path / "link.json")
