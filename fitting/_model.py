@@ -14,9 +14,9 @@ wherever the stepper needs it. With θ = (ln E*, ln η, ln z0, b/F_u) the model 
     β = E* d_c^{5/2} / (6π η v0 R^{3/2}),   z̄0 = z0/d_c                      (paper eqs 8e, 11b)
 
 where F̄ is the error-controlled ``lubjax.rollout`` read at t̄_k by the stepper's own interpolant
-(F̄ = 0 before the motion starts; the steps do not depend on the sample times, so thousands of
-samples cost no extra steps), b a constant load-cell offset and F_u a force unit (the peak
-measured force) that keeps θ of order one. Residuals are r_k = w_k (F_k(θ) - F_k^data)/F_u
+(the run starts at rest at the first sample; the steps do not depend on the sample times, so
+thousands of samples cost no extra steps), b a constant load-cell offset and F_u a force unit
+(the peak measured force) that keeps θ of order one. Residuals are r_k = w_k (F_k(θ) - F_k^data)/F_u
 with w_k ∈ {0, 1} (0 pads traces of different lengths to a common shape so that several traces
 ``vmap`` together).
 
@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import lubjax
+from lubjax._indenter import motion_start
 
 from ._io import Trace
 
@@ -129,14 +130,16 @@ class Solver(NamedTuple):
 
 
 def history(trace: Trace, scales: Scales) -> lubjax.SampledTravel:
-    """The measured travel d(t)/d_c on t̄ = (t - t_on)/t_c, from the last quiescent sample on."""
+    """The measured travel d(t)/d_c on t̄ = (t - t_on)/t_c, from the first sample on.
+
+    The run starts at rest at the first sample (the quiet stretch costs a few steps): starting
+    it at t_on instead would assume no pressure there, while the stage may have started moving
+    between samples (at 100 Hz the sample after t_on already carried 1.6 % of the peak force)."""
     tb = (trace.time - scales.t_on) / scales.time_scale
-    keep = tb >= 0
-    return lubjax.SampledTravel(
-        tb[keep],
-        trace.displacement[keep] / scales.indent,
-        breakpoints=(0.0, scales.t_end_motion),
-    )
+    travel = trace.displacement / scales.indent
+    # Restart at the exact onset where the record is exactly still before it (t̄ ≤ 0).
+    onset = min(float(motion_start(tb, travel)), 0.0)
+    return lubjax.SampledTravel(tb, travel, breakpoints=(onset, scales.t_end_motion))
 
 
 def make_solver(settings=None) -> Solver:
@@ -180,9 +183,9 @@ def trace_data(
     )
 
 
-def history_size(trace: Trace, scales: Scales) -> int:
+def history_size(trace: Trace) -> int:
     """Number of travel samples :func:`trace_data` uses for ``trace`` before padding."""
-    return int(np.count_nonzero((trace.time - scales.t_on) / scales.time_scale >= 0))
+    return int(trace.time.size)
 
 
 def dimensionless(theta, data: TraceData):

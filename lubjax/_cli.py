@@ -7,9 +7,12 @@ traceback. Outputs are checked before the run and written atomically (see ``_fil
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import sys
+
+import numpy as np
 
 from ._files import (
     EXIT_EPILOG,
@@ -66,7 +69,12 @@ def _parser() -> Parser:
         "--dr", type=positive_float, default=None, help="fine-zone mesh spacing (Settings.dr)"
     )
     r.add_argument(
-        "--dt", type=positive_float, default=None, help="loading-phase step (Settings.dt)"
+        "--rtol", type=positive_float, default=None,
+        help="accuracy: local error tolerance of each step, and the mesh (Settings.rtol, "
+        "default 3e-4)",
+    )
+    r.add_argument(
+        "--max-steps", type=int, default=None, help="attempted-step budget (Settings.max_steps)"
     )
     r.add_argument("--order", type=int, choices=(1, 2), default=None, help="1: backward Euler")
     r.add_argument("--out", help="write results as JSON here")
@@ -117,13 +125,9 @@ def _relax(args) -> int:
         t_end = args.t_end / test.time_scale if test else args.t_end
     if not (math.isfinite(t_end) and t_end > 0):
         raise UsageError(f"--t-end must be > 0, got {args.t_end}")
-    overrides = {
-        k: v for k, v in [("dr", args.dr), ("dt", args.dt), ("order", args.order)] if v is not None
-    }
-    try:
-        settings = Settings(**overrides)
-    except TypeError as err:  # a flag this version's Settings does not have
-        raise UsageError(f"settings {sorted(overrides)}: {err}") from None
+    given = [("dr", args.dr), ("rtol", args.rtol), ("order", args.order),
+             ("max_steps", args.max_steps)]
+    settings = Settings(**{k: v for k, v in given if v is not None})
     profile_times = [t for t in (0.25, 0.5, 1.0, 2.0, t_end) if t <= t_end]
     prepare_outputs(outputs)
     res = relax(beta, z0, t_end, settings=settings, profile_times=profile_times)
@@ -136,8 +140,11 @@ def _relax(args) -> int:
         "h_center": res.film_center.tolist(),
         "run_s": res.run_s,
         "compile_s": res.compile_s,
+        "force_error": res.force_error.tolist(),
+        "steps": res.accepted,
+        "rejected_steps": res.rejected,
         "ok": res.ok,
-        "settings": vars(settings) if hasattr(settings, "__dict__") else None,
+        "settings": dataclasses.asdict(settings),
     }
     if test:
         out.update(
@@ -153,8 +160,9 @@ def _relax(args) -> int:
         )
     print(
         f"beta={beta:.4g} z0={z0:.4g}: F(t_end)={res.force[-1]:.5g}, peak F={res.force.max():.5g}, "
-        f"min film={res.film_min.min():.3g}; {res.t.size - 1} steps, "
-        f"run {res.run_s:.3f} s, compile {res.compile_s:.2f} s"
+        f"min film={res.film_min.min():.3g}; estimated error {np.nanmax(res.force_error):.2g}; "
+        f"{res.accepted} steps ({res.rejected} rejected), run {res.run_s:.3f} s, "
+        f"compile {res.compile_s:.2f} s"
     )
     if args.out:
         with atomic_open(args.out, "w") as f:

@@ -114,6 +114,21 @@ def test_sampled_history_matches_ideal_ramp():
     assert np.max(np.abs(a.at(b.t) - b.force)) < 2e-3 * a.force.max()
 
 
+def test_sampled_history_is_the_monotone_cubic():
+    """SampledTravel interpolates like scipy's PchipInterpolator (an independent
+    implementation), and holds the end values outside the samples."""
+    from scipy.interpolate import PchipInterpolator
+
+    rng = np.random.default_rng(1)
+    t = np.sort(rng.uniform(0, 3, 40))
+    d = np.cumsum(rng.uniform(-0.1, 1, 40))
+    hist = lubjax.SampledTravel(t, d)
+    inside = np.linspace(t[0], t[-1], 997)
+    np.testing.assert_allclose(hist.travel(inside), PchipInterpolator(t, d)(inside),
+                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(hist.travel([t[0] - 1, t[-1] + 1]), [d[0], d[-1]], atol=0)
+
+
 def test_smoothed_start_eq_23():
     ramp = lubjax.RampHold(t_accel=0.1)
     t = np.array([-0.1, -0.05, 0.0, 0.5, 1.0, 2.0])

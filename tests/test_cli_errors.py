@@ -57,6 +57,7 @@ def _fake_result(t_end=1.0, n=20):
         t=t, force=np.sin(t) + 0.1, film_min=0.5 - 0.1 * t, film_center=0.6 - 0.1 * t,
         run_s=0.01, compile_s=0.02, ok=True, beta=100.0, z0=0.5, r=r,
         profile_times=np.array([0.5, 1.0]), pressure=np.ones((2, 30)), film=np.ones((2, 30)),
+        force_error=np.full(n, 1e-4), accepted=n - 1, rejected=0,
     )  # fmt: skip
 
 
@@ -101,7 +102,9 @@ DIM = ["relax", "--beta", "100", "--z0", "0.5"]
 RELAX_USAGE = [
     # (argv, expected message fragment) -- item 5, 8, 9 of the issue
     (DIM + ["--dr", "0"], "argument --dr: must be a finite number > 0, got '0'"),
-    (DIM + ["--dt", "0"], "argument --dt: must be a finite number > 0"),
+    (DIM + ["--rtol", "0"], "argument --rtol: must be a finite number > 0"),
+    (DIM + ["--rtol", "0.5"], "Settings.rtol must be in [1e-10, 0.1]"),
+    (DIM + ["--max-steps", "3"], "Settings.max_steps must be an integer >= 10"),
     (DIM + ["--dr", "nan"], "argument --dr: must be a finite number > 0"),
     (DIM + ["--dr", "-0.01"], "argument --dr: must be a finite number > 0"),
     (DIM + ["--t-end", "0"], "argument --t-end: must be a finite number > 0"),

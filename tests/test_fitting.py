@@ -1,7 +1,8 @@
 """The fit: forward-mode gradients, recovery of the synthetic truth, honest standard errors, CLI.
 
-The synthetic traces in data/ come from a much finer grid than the fit uses
-(data/make_synthetic.py), so recovery tests include the discretisation error of the fit grid.
+The synthetic traces in data/ come from a much finer, fixed-grid solver than the fit's
+error-controlled model (data/make_synthetic.py), so recovery tests include the model's
+discretisation error.
 """
 
 import json
@@ -35,52 +36,74 @@ def _trace(stem, clean=False):
     return fitting.read_trace(path)
 
 
-def test_gradient_matches_central_differences():
-    """∂F/∂(E*, η, z0) in SI by jacfwd vs central differences with ε = 100·√eps·|x|.
+COARSE = lubjax.Settings(dr=0.05, mesh_growth=1.2, length=100.0, error_estimate=False)
 
-    (The factor 100 keeps the rounding of the dense solves, ~1e-12 relative, out of the
-    difference quotient; the truncation error ε² stays ~1e-11.)"""
-    tr = _trace("paper_dc140", clean=True)
+
+def _short(stem, t_bar):
+    tr = _trace(stem, clean=True)
     sc = fitting.scales_from_trace(tr)
-    keep = tr.time < sc.t_on + 2.5 * sc.time_scale
+    keep = tr.time < sc.t_on + t_bar * sc.time_scale
     tr = tr._replace(time=tr.time[keep], displacement=tr.displacement[keep], force=tr.force[keep])
-    coarse = lubjax.Settings(dr=0.05, mesh_growth=1.2, dt=0.05, dt_min=1e-3, time_growth=1.3)
-    grid = fitting.make_grid(2.4, sc.t_end_motion, coarse)
-    data = fitting.trace_data(tr, sc, grid)
+    return tr, fitting.scales_from_trace(tr)
+
+
+def test_gradient_matches_central_differences():
+    """∂F/∂(E*, η, z0) in SI by jacfwd vs central differences, through the measured history.
+
+    The adaptive model is smooth in the parameters only up to its step choices (the step sizes
+    are not differentiated), so ε is sized to that noise, not to eps. At rtol = 1e-7 and
+    ε = 1e-3·|x| the quotient scatters by ≤ 5e-4 of the largest derivative (measured: 4e-4,
+    5e-4, 6e-5 for E*, η, z0; ε = 1e-4 is noise-dominated, ε = 1e-2 truncation-dominated for
+    z0). The smooth-history check at 1e-4 is tests/test_stepper.py."""
+    tr, sc = _short("paper_dc140", 2.5)
+    solver = fitting.make_solver(lubjax.Settings(
+        rtol=1e-7, dr=0.05, mesh_growth=1.2, length=100.0, max_steps=100_000))
+    data = fitting.trace_data(tr, sc)
     x = jnp.array([3.92e6, 100.0, 140e-6])
 
     def force(p):
         theta = jnp.concatenate([jnp.log(p), jnp.zeros(1)])
-        return fitting.predict(theta, data, grid)[0]
+        return fitting.predict(theta, data, solver)[0]
 
     J = np.asarray(jax.jit(jax.jacfwd(force))(x))
     f = jax.jit(force)
     for i in range(3):
-        h = 100 * math.sqrt(np.finfo(np.float64).eps) * float(x[i])
+        h = 1e-3 * float(x[i])
         e = jnp.zeros(3).at[i].set(h)
         fd = (np.asarray(f(x + e)) - np.asarray(f(x - e))) / (2 * h)
         err = np.max(np.abs(J[:, i] - fd)) / np.max(np.abs(J[:, i]))
-        assert err <= 1e-5, (i, err)
+        assert err <= 1e-3, (i, err)
 
 
 def test_residual_jacobian_is_forward_mode_and_consistent():
-    tr = _trace("paper_dc126", clean=True)
-    sc = fitting.scales_from_trace(tr)
-    keep = tr.time < sc.t_on + 1.5 * sc.time_scale
-    tr = tr._replace(time=tr.time[keep], displacement=tr.displacement[keep], force=tr.force[keep])
-    grid = fitting.make_grid(
-        1.4,
-        sc.t_end_motion,
-        lubjax.Settings(dr=0.05, mesh_growth=1.2, dt=0.05, dt_min=1e-3, time_growth=1.3),
-    )
-    data = fitting.trace_data(tr, sc, grid)
+    tr, sc = _short("paper_dc126", 1.5)
+    solver = fitting.make_solver(COARSE)
+    data = fitting.trace_data(tr, sc)
     theta = jnp.array([math.log(3.92e6), math.log(100.0), math.log(126e-6), 0.0])
-    r, J, film = jax.jit(fitting.residuals_and_jacobian)(theta, data, grid)
-    J2 = jax.jit(jax.jacfwd(lambda th: fitting.residuals(th, data, grid)[0]))(theta)
-    np.testing.assert_allclose(J, J2, rtol=1e-10, atol=1e-12)
+    r, J, film = jax.jit(fitting.residuals_and_jacobian)(theta, data, solver)
+    J2 = jax.jit(jax.jacfwd(lambda th: fitting.residuals(th, data, solver)[0]))(theta)
+    # Two compilations round differently; where an error ratio sits at 1 that flips an
+    # accept/reject decision and the run takes other (equally valid) steps: the two agree to the
+    # model's accuracy at rtol = 3e-4 (measured 1e-3 of the largest entry), not to the last bit.
+    scale = np.max(np.abs(J[:, :3]))
+    np.testing.assert_allclose(J[:, :3], J2[:, :3], rtol=0, atol=3e-3 * scale)
     assert float(film) > 0
     # Offset column: ∂r/∂b = w (in F_u units).
     np.testing.assert_allclose(J[:, 3], 1.0)
+
+
+def test_model_matches_an_independent_fine_solver():
+    """The fit's model at the true parameters against the clean trace made by the earlier
+    fixed-grid solver on a much finer grid (data/make_synthetic.py): within 0.3 % of the peak
+    at every sample (both are discretisations; this bounds their difference)."""
+    tr = _trace("paper_dc140", clean=True)
+    sc = fitting.scales_from_trace(tr)
+    solver = fitting.make_solver()
+    data = fitting.trace_data(tr, sc)
+    theta = jnp.array([math.log(3.92e6), math.log(100.0), math.log(140e-6), 0.0])
+    model, film = jax.jit(fitting.predict)(theta, data, solver)
+    err = np.max(np.abs(np.asarray(model) - tr.force)) / np.max(tr.force)
+    assert err < 3e-3 and float(film) > 0
 
 
 def test_starting_values_from_physics_are_within_a_factor_two():
