@@ -99,6 +99,8 @@ def main(argv=None):
     ap.add_argument("--out", default="benchmarks/out/accuracy.md")
     ap.add_argument("--betas", type=float, nargs="*", default=None)
     ap.add_argument("--z0s", type=float, nargs="*", default=None)
+    ap.add_argument("--cached-only", action="store_true",
+                    help="skip cases whose reference runs are not cached yet")
     args = ap.parse_args(argv)
     betas, z0s = ((10.0, 1000.0), (0.5, 1.11)) if args.quick else (BETAS, Z0S)
     betas = args.betas or betas
@@ -107,6 +109,12 @@ def main(argv=None):
     rows = []
     for beta in betas:
         for z0 in z0s:
+            if args.cached_only and not all(
+                os.path.exists(os.path.join(CACHE, f"accuracy2_{tag}_b{beta:g}_z{z0:g}.npz"))
+                for tag in ("ref", "check")
+            ):
+                print(f"β={beta:g} z̄0={z0:g}: reference not cached, skipped", file=sys.stderr)
+                continue
             ref = reference(beta, z0, REFERENCE, "ref")
             check = reference(beta, z0, REFERENCE_CHECK, "check")
             out, res = run(beta, z0, settings)

@@ -429,7 +429,7 @@ def fit_traces(
     for members in [list(range(len(traces)))]:
         t0 = time.perf_counter()
         n_pad = max(traces[i].time.size for i in members)
-        n_hist = max(_model.history_size(traces[i]) for i in members)
+        n_hist = max(_model.history_size(traces[i], scales[i]) for i in members)
         datas = [_model.trace_data(traces[i], scales[i], n_pad, n_hist) for i in members]
         n_samples = np.array([traces[i].time.size for i in members])
         theta0 = np.array(

@@ -140,7 +140,8 @@ def test_smoothed_start_eq_23():
 
 
 def test_vmap_and_forward_gradient_in_beta_and_z0():
-    settings = lubjax.Settings(dr=0.05, mesh_growth=1.1, length=50.0, rtol=1e-7)
+    settings = lubjax.Settings(dr=0.05, mesh_growth=1.1, length=50.0, rtol=1e-9,
+                               max_steps=100_000, error_estimate=False)
     plan = lubjax.make_plan(1.5, settings=settings, times=np.linspace(0, 1.5, 31))
     f = jax.jit(lambda b, z: lubjax.force_curve(plan, b, z, mode="forward"))
     betas = jnp.array([50.0, 200.0])
@@ -148,20 +149,20 @@ def test_vmap_and_forward_gradient_in_beta_and_z0():
     for k, b in enumerate(betas):
         # Batched and single LU solves round differently (condition numbers ~1e7: ~1e-9
         # relative), the error estimates with them, and the step sizes follow: the runs agree
-        # far inside their tolerance (1e-7), not to the last bit.
+        # far inside their tolerance, not to the last bit.
         assert np.allclose(batched[k], f(b, 0.8), rtol=1e-6, atol=1e-14)
     jac = jax.jit(jax.jacfwd(lambda p: f(p[0], p[1])))
     x = jnp.array([100.0, 0.8])
     J = np.asarray(jac(x))
-    # The force carries roundoff ~1e-9 relative (condition number ~1e7 times eps), so the step
-    # that balances truncation (h²) against roundoff (1e-9/h) is ~1e-4 relative, not √eps.
+    # Central differences of the adaptive solution: ε sized to its step-choice noise, not to
+    # eps (see tests/test_stepper.py::test_gradient_against_central_differences).
     for k in range(2):
-        h = 1e-4 * abs(float(x[k]))
+        h = 1e-3 * abs(float(x[k]))
         e = np.zeros(2)
         e[k] = h
         fd = (np.asarray(f(*(x + e))) - np.asarray(f(*(x - e)))) / (2 * h)
         scale = np.max(np.abs(fd))
-        assert np.max(np.abs(J[:, k] - fd)) < 1e-5 * scale, k
+        assert np.max(np.abs(J[:, k] - fd)) < 1e-4 * scale, k
 
 
 def test_cli_dimensionless_and_si(tmp_path):

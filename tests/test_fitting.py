@@ -95,14 +95,17 @@ def test_residual_jacobian_is_forward_mode_and_consistent():
 def test_model_matches_an_independent_fine_solver():
     """The fit's model at the true parameters against the clean trace made by the earlier
     fixed-grid solver on a much finer grid (data/make_synthetic.py): within 0.3 % of the peak
-    at every sample (both are discretisations; this bounds their difference)."""
+    at every sample after the first moving one (both are discretisations; this bounds their
+    difference). The first moving sample is off by ~1.5 % of the peak: the model starts at rest
+    at t_on, while the stage started between samples (fitting/_model.py, history)."""
     tr = _trace("paper_dc140", clean=True)
     sc = fitting.scales_from_trace(tr)
     solver = fitting.make_solver()
     data = fitting.trace_data(tr, sc)
     theta = jnp.array([math.log(3.92e6), math.log(100.0), math.log(140e-6), 0.0])
     model, film = jax.jit(fitting.predict)(theta, data, solver)
-    err = np.max(np.abs(np.asarray(model) - tr.force)) / np.max(tr.force)
+    after = tr.time > sc.t_on + 0.015
+    err = np.max(np.abs(np.asarray(model) - tr.force)[after]) / np.max(tr.force)
     assert err < 3e-3 and float(film) > 0
 
 

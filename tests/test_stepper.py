@@ -126,12 +126,12 @@ def test_corners_of_the_parameter_box_to_a_million(beta, z0):
     res = lubjax.relax(beta, z0, 1e6, settings=lubjax.Settings(rtol=1e-3, error_estimate=False))
     assert res.ok and res.accepted < 5000
     peak = res.force.max()
-    assert res.force.min() >= -1e-13 * peak
+    assert res.force.min() >= -(1e-12 + 1e-13 * peak)
     assert np.all(res.film_min > 0)
     if z0 < 1:
         assert res.force[-1] == pytest.approx(lubjax.hertz_force(z0), rel=2e-3)
     else:
-        assert res.force[-1] < 1e-12 * peak
+        assert res.force[-1] < 1e-9 * peak
 
 
 def test_error_estimate_bounds_the_error():
