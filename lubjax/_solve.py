@@ -60,11 +60,9 @@ class Settings:
     tolerance and, unless given explicitly, the mesh (``dr``, ``mesh_growth``, ``length``).
 
     Attributes:
-        rtol, atol: local error tolerance of every step on the film h̄ (each node) and on F̄:
-            |error| ≤ atol + rtol·|value|. atol (1e-12) sits above the pressure solve's
-            absolute rounding of F̄ (~4e-14, seen where the force emerges from zero in a smooth
-            start) and below 1e-6 of the smallest peak force in the mapped range (~1.5e-3 at
-            β = 10³, z̄0 = 2). The global error is a few times rtol (README table).
+        rtol, atol: local error tolerance of every step on the film h̄ at each node,
+            |error| ≤ atol + rtol·|h̄|, and on F̄, |error| ≤ 1e-12 + rtol·max(|F̄|,
+            force_floor × peak). The global error is a few times rtol (README table).
         dr: mesh spacing in the fine zone [0, r_fine] (default: from rtol).
         r_fine: edge of the uniform fine zone (covers the Hertz radius √(1-z̄0) ≤ 1 and its rim).
         length: domain length L̄ with p̄(L̄) = 0; force truncation ≈ 4z̄/L̄² (default: from rtol).
@@ -81,7 +79,7 @@ class Settings:
     """
 
     rtol: float = 3e-4
-    atol: float = 1e-12
+    atol: float = 1e-9
     dr: float | None = None
     r_fine: float = 1.6
     length: float | None = None

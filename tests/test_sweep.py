@@ -18,11 +18,13 @@ def test_sweep_matches_single_runs():
     assert res.force.shape == (3, res.t.size) and res.ok.all()
     for k in range(3):
         single = lubjax.relax(res.beta[k], res.z0[k], t_end=2.0, settings=COARSE)
-        assert res.steps[k] == single.accepted
+        # Batched and single solves round differently; an error ratio at 1 can flip one
+        # accept/reject decision, so the step counts agree to a step or two, not exactly.
+        assert abs(int(res.steps[k]) - single.accepted) <= 2
         # Batched LU solves round differently, the error estimates with them, and the step
         # sizes follow: the runs agree far inside their tolerance, not to the last bit.
-        assert np.allclose(res.force[k], single.at(res.t), rtol=1e-6,
-                           atol=1e-12 * single.force.max())
+        peak = single.force.max()
+        assert np.max(np.abs(res.force[k] - single.at(res.t))) < 1e-6 * peak
 
 
 def test_sweep_rejects_bad_values():
