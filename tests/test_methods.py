@@ -47,9 +47,10 @@ def test_paper_scheme_dense_and_reduced_agree():
 def test_newton_agrees_with_linearly_implicit_lubjax():
     # Same FV mesh, both backward Euler: they differ by O(Δt̄) (lagged vs implicit mobility).
     t_out = np.linspace(0.0, 1.5, 7)
-    grid = dict(mesh="graded", dr=0.05, length=10.0, mesh_growth=1.1, steps="fixed", dt=2.5e-3)
-    f_newton, info = newton.run(100.0, 0.5, t_out, **grid)
-    f_lub, info_l = lubjax_variant.run(100.0, 0.5, t_out, order=1, **grid)
+    mesh = dict(mesh="graded", dr=0.05, length=10.0, mesh_growth=1.1)
+    f_newton, info = newton.run(100.0, 0.5, t_out, steps="fixed", dt=2.5e-3, **mesh)
+    # lubjax's backward Euler under its own error controller (no fixed grid any more).
+    f_lub, info_l = lubjax_variant.run(100.0, 0.5, t_out, order=1, rtol=1e-4, **mesh)
     assert info["ok"] and info["converged"] and info_l["ok"]
     assert np.max(np.abs(f_newton - f_lub)) / np.max(f_lub) < 5e-3
 
@@ -75,3 +76,10 @@ def test_explicit_euler_unstable_at_moderate_step():
 def test_uniform_grid_contains_outputs():
     t = common.uniform_grid(5.0, 1e-1, common.default_t_out(5.0, 0.1))
     assert t.size == 51 and np.allclose(np.diff(t), 0.1)
+
+
+def test_growing_grid_nodes_and_caps():
+    t = common.growing_grid(5.0, 1e-2, 1e-6, 1.1, t_out=[0.5, 2.0])
+    assert t[0] == 0.0 and t[-1] == 5.0
+    assert np.all(np.isin([0.5, 1.0, 2.0], t)) and np.all(np.diff(t) > 0)
+    assert np.max(np.diff(t[t <= 1.0])) <= 1e-2 + 1e-12  # capped in the loading

@@ -43,11 +43,35 @@ def uniform_grid(t_end: float, dt: float, t_out=()) -> np.ndarray:
 
 
 def growing_grid(t_end: float, dt: float, dt_min: float = 1e-6, growth: float = 1.1,
-                 t_out=(), hold_dt_max: float | None = None) -> np.ndarray:
-    """lubjax's grid (small steps after each velocity jump, growing), with t_out as nodes."""
-    return lubjax.time_grid(t_end, dt=dt, dt_min=dt_min, growth=growth, breakpoints=(1.0,),
-                            include=tuple(float(x) for x in np.atleast_1d(t_out)),
-                            hold_dt_max=hold_dt_max)
+                 t_out=(), hold_dt_max: float | None = None,
+                 breakpoints: tuple[float, ...] = (1.0,)) -> np.ndarray:
+    """The comparison methods' own fixed geometric grid (lubjax itself is error-controlled now):
+    in each segment between velocity jumps, steps start at ``dt_min`` and grow by ``growth`` up to
+    ``dt`` in the loading and up to ``hold_dt_max`` (default: no cap) after the last jump; the
+    jumps and ``t_out`` are nodes (a node that would leave a sliver < 0.3 step is dropped)."""
+    if not (0 < dt_min <= dt and 1.0 < growth <= 1.5 and t_end > 0):
+        raise ValueError(f"bad grid: t_end={t_end}, dt={dt}, dt_min={dt_min}, growth={growth}")
+    inner = sorted({float(b) for b in breakpoints if 0.0 < b < t_end})
+    last_break = inner[-1] if inner else 0.0
+    nodes = [0.0]
+    for edge in [*inner, t_end]:
+        cap = dt if edge <= last_break else (hold_dt_max or np.inf)
+        step = dt_min
+        while nodes[-1] < edge:
+            s = min(step, cap)
+            nxt = nodes[-1] + s
+            if edge - nxt < 0.3 * s:  # absorb a sliver into this step
+                nxt = edge
+            nodes.append(nxt)
+            step *= growth
+    grid = np.asarray(nodes)
+    stops = np.unique(np.asarray([x for x in np.atleast_1d(t_out) if 0.0 < x < t_end], float))
+    if stops.size:
+        local = np.diff(grid)[np.clip(np.searchsorted(grid, stops) - 1, 0, grid.size - 2)]
+        gap = np.min(np.abs(grid[:, None] - stops[None, :]) / (0.3 * local[None, :]), axis=1)
+        keep = (gap >= 1.0) | np.isin(grid, [0.0, *inner, t_end])
+        grid = np.union1d(grid[keep], stops)
+    return grid
 
 
 def at_outputs(t_grid: np.ndarray, values: np.ndarray, t_out: np.ndarray) -> np.ndarray:
