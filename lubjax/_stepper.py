@@ -108,10 +108,9 @@ class Tolerance:
 DEFAULT_TOLERANCE = Tolerance()
 # The force is held to rtol per step, like the film. Tighter would help decaying tails (at rtol
 # the relative local errors of ~100 steps add up to 2-3 % where F̄ has fallen to 1e-6 of its
-# peak; 0.25·rtol gave 0.95 %), but below rtol the force's own rounding in the thinnest films
+# peak; rtol/4 gave 0.95 %), but below rtol the force's own rounding in the thinnest films
 # (β = 10⁶, z̄0 = 0.05, coarse mesh) exceeded the tolerance and the steps stalled: robustness
 # first; the tail error is in the README's accuracy table.
-FORCE_RTOL_FACTOR = 1.0
 # The force's absolute floor: above its rounding in the solve (~4e-14, where a smooth start makes
 # it emerge from zero) and below 1e-6 of the smallest peak force of the mapped range (~1.5e-3 at
 # β = 10³, z̄0 = 2). The film's floor is Settings.atol (1e-9): a relative control of the thinnest
@@ -280,6 +279,11 @@ def _interpolate(t_query, t0, t1, t2, y0, y1, y2, linear):
     return jnp.where(linear, lin, quad)
 
 
+def _restart_step(tol: Tolerance, beta):
+    """First step at t̄_start and after each velocity jump: the pressure's fast scale 1/β."""
+    return tol.initial_step / jnp.maximum(1.0, beta)
+
+
 def _initial_state(disc, beta, z0, t_start, tol: Tolerance, profile_times) -> State:
     zero = jnp.zeros_like(disc.r)
     h = film_thickness(disc, z0, zero)
@@ -302,7 +306,7 @@ def _initial_state(disc, beta, z0, t_start, tol: Tolerance, profile_times) -> St
         force_prev2=scalar(0.0),
         force_peak=scalar(0.0),
         since_restart=integer(0),
-        dt_next=jax.lax.stop_gradient(tol.initial_step / jnp.maximum(1.0, beta)),
+        dt_next=jax.lax.stop_gradient(_restart_step(tol, beta)),
         error_prev=scalar(1.0),
         last_rejected=jnp.asarray(False),
         accepted=integer(0),
@@ -363,7 +367,7 @@ def _attempt(disc, beta, z0, history, t_end, tol: Tolerance, profile_times, stat
     # anyway: the solve's rounding (~1e-14 of the peak) made steps collapse at F̄ ~ 1e-10 of
     # the peak with rtol = 1e-7, and a measured travel's quantisation drives a force ~1e-7 of
     # the peak that relative control chased through 10⁴ steps.
-    scale_f = FORCE_ATOL + FORCE_RTOL_FACTOR * tol.rtol * jnp.maximum(
+    scale_f = FORCE_ATOL + tol.rtol * jnp.maximum(
         jnp.maximum(jnp.abs(force), jnp.abs(state.force)), tol.force_floor * state.force_peak
     )
     # A force emerging from exactly zero (a quiet stretch) has no relative error to estimate
@@ -384,7 +388,7 @@ def _attempt(disc, beta, z0, history, t_end, tol: Tolerance, profile_times, stat
     step_factor = ctrl.next_step_factor(
         accept, valid, error, state.error_prev, order, state.last_rejected
     )
-    restart_step = tol.initial_step / jnp.maximum(1.0, beta)
+    restart_step = _restart_step(tol, beta)
     # A segment's first step has no estimate: grow by the largest allowed ratio.
     step_factor = jnp.where(state.since_restart == 0, ctrl.MAX_GROWTH, step_factor)
     dt_next = dt * step_factor
