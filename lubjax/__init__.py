@@ -18,6 +18,7 @@ from ._analytic import (  # noqa: E402
     rigid_squeeze_force,
     rigid_squeeze_pressure,
 )
+from ._drives import FreeSphere, Load, Spring, Travel, as_drive, restitution  # noqa: E402
 from ._indenter import RampHold, SampledTravel  # noqa: E402
 from ._influence import force_weights, influence_matrix, kernel  # noqa: E402
 from ._mesh import Mesh, graded_mesh, uniform_mesh  # noqa: E402
@@ -47,16 +48,23 @@ from ._stepper import (  # noqa: E402
 )
 from ._sweep import SweepResult, sweep  # noqa: E402
 from ._units import (  # noqa: E402
+    Collision,
+    CreepTest,
     RelaxationTest,
     contact_modulus,
+    hertz_indentation,
     plane_strain_modulus,
     reduced_radius,
 )
 
 __all__ = [
     "BETA_RANGE",
+    "Collision",
+    "CreepTest",
     "Z0_RANGE",
     "Discretisation",
+    "FreeSphere",
+    "Load",
     "Mesh",
     "Plan",
     "RampHold",
@@ -65,11 +73,14 @@ __all__ = [
     "SampledTravel",
     "Settings",
     "SolverError",
+    "Spring",
     "State",
     "Step",
     "SweepResult",
     "Tolerance",
     "Trajectory",
+    "Travel",
+    "as_drive",
     "check_parameters",
     "contact_modulus",
     "discretise",
@@ -81,6 +92,7 @@ __all__ = [
     "graded_mesh",
     "hertz_displacement",
     "hertz_force",
+    "hertz_indentation",
     "hertz_pressure",
     "influence_matrix",
     "kernel",
@@ -89,6 +101,7 @@ __all__ = [
     "reduced_radius",
     "relax",
     "rigid_squeeze_force",
+    "restitution",
     "rigid_squeeze_pressure",
     "rollout",
     "sweep",

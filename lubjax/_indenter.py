@@ -45,6 +45,8 @@ class RampHold:
     def breakpoints_array(self):
         return jnp.asarray(self.breakpoints)
 
+    monotone = True  # never retracts
+
     def travel(self, t):
         t = jnp.asarray(t)
         ramp = jnp.clip(t, 0.0, 1.0)
@@ -88,6 +90,9 @@ class SampledTravel:
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "travel_samples", d)
         object.__setattr__(self, "slopes", _monotone_slopes(t, d))
+        # Never retracting: then a negative film force is a step error, not physics (a leaf,
+        # not static, so stacked histories of both kinds still vmap together).
+        object.__setattr__(self, "monotone", np.bool_(np.all(np.diff(d) >= 0)))
         if not len(self.breakpoints):
             object.__setattr__(self, "breakpoints", _motion_breakpoints(t, d))
         bp = np.asarray(self.breakpoints, dtype=np.float64).ravel()
@@ -172,14 +177,14 @@ def motion_end(t: np.ndarray, d: np.ndarray) -> float:
     return t[min(exact + 1, t.size - 1)]
 
 
-_SAMPLED_LEAVES = ("t", "travel_samples", "slopes", "breakpoints")
+_SAMPLED_LEAVES = ("t", "travel_samples", "slopes", "breakpoints", "monotone")
 
 
 def _flatten_sampled(h: SampledTravel):
     # Validated objects hold a tuple; unflattened ones already hold the leaf (array or tracer).
     bp = h.breakpoints
     bp = np.asarray(bp, np.float64) if isinstance(bp, tuple) else bp
-    return (h.t, h.travel_samples, h.slopes, bp), None
+    return (h.t, h.travel_samples, h.slopes, bp, h.monotone), None
 
 
 def _unflatten_sampled(_, children):

@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._drives import as_drive
 from ._indenter import RampHold, SampledTravel
 from ._mesh import Mesh, graded_mesh
 from ._stepper import (
@@ -131,7 +132,7 @@ class Plan(NamedTuple):
 
     disc: Discretisation
     tol: Tolerance
-    history: RampHold | SampledTravel
+    drive: object  # a drive (lubjax.Travel, Load, Spring, FreeSphere)
     t_end: float
     t: np.ndarray  # output times of force_curve
     mesh: Mesh
@@ -163,18 +164,29 @@ def _check_times(times, name, t_start, t_end) -> np.ndarray:
     return arr
 
 
+def _drive_of(history, drive):
+    if history is not None and drive is not None:
+        raise ValueError(
+            "give either history= (a prescribed travel) or drive=, not both: "
+            "drive=lubjax.Travel(history) is the same as history=history"
+        )
+    return as_drive(drive if drive is not None else history)
+
+
 def make_plan(
     t_end: float = 5.0,
     *,
     history: RampHold | SampledTravel | None = None,
+    drive=None,
     settings: Settings | None = None,
     times=None,
 ) -> Plan:
-    """Mesh and influence matrix (cached per mesh), tolerance, history and output times.
+    """Mesh and influence matrix (cached per mesh), tolerance, drive and output times.
 
+    ``history``: a prescribed travel (default ``RampHold()``); or ``drive``: any drive.
     ``times``: where :func:`force_curve` reports F̄ (default 501 equally spaced times).
     """
-    history = RampHold() if history is None else history
+    history = _drive_of(history, drive)
     settings = Settings() if settings is None else settings
     t_start = float(history.t_start)
     t_end = _check_t_end(t_end, t_start)
@@ -196,7 +208,7 @@ def force_curve(plan: Plan, beta, z0, times=None, *, mode: str = "reverse"):
     Times the run did not reach (budget exhausted) come back as NaN.
     """
     times = plan.t if times is None else times
-    traj = rollout(plan.disc, beta, z0, plan.history, plan.t_end, plan.tol, mode=mode)
+    traj = rollout(plan.disc, beta, z0, plan.drive, plan.t_end, plan.tol, mode=mode)
     return evaluate(traj.steps, times, "force")
 
 
@@ -228,7 +240,10 @@ class Result:
 
     Attributes:
         t: accepted step times t̄ (the controller's); force F̄, film_min min h̄, film_center h̄(0)
-            and outflow (volume flux through the outer boundary per unit 2π) at those times.
+            and outflow (volume flux through the outer boundary per unit 2π) at those times;
+            gap z̄ (the sphere's position: prescribed by a travel, free under other drives),
+            velocity dz̄/dt̄, elastic_energy Ū and viscous dissipation rate D̄ (units F_s d_c
+            and F_s d_c/t_c: dŪ/dt̄ + F̄ dz̄/dt̄ = -D̄).
             Read any of them at other times with :meth:`at` (the stepper's interpolant).
         profile_times: the requested profile times; r: the mesh;
         pressure, displacement, film: p̄, w̄, h̄ at those times, shape (len(profile_times), N).
@@ -237,6 +252,8 @@ class Result:
         force_error: estimated error of ``force`` at ``t`` (NaN if Settings.error_estimate is
             off): space |F̄ - F̄_coarse|/3 (second order, nested mesh of every other node) plus
             time |F̄_coarse - F̄_coarse(8 rtol)|/(8^{2/3} - 1) (global error ∝ rtol^{2/3}).
+            Zero where the drive prescribes the force. gap_error: the same for z̄ (zero
+            where the drive prescribes the travel).
         accepted, rejected: step counts. compile_s, run_s: wall time of compilation (0 when
         cached) and of the run itself.
     """
@@ -249,6 +266,10 @@ class Result:
     film_min: np.ndarray
     film_center: np.ndarray
     outflow: np.ndarray
+    gap: np.ndarray
+    velocity: np.ndarray
+    elastic_energy: np.ndarray
+    dissipation: np.ndarray
     r: np.ndarray
     profile_times: np.ndarray
     pressure: np.ndarray
@@ -259,6 +280,7 @@ class Result:
     finished: bool
     stop_reason: str
     force_error: np.ndarray
+    gap_error: np.ndarray
     accepted: int
     rejected: int
     compile_s: float
@@ -270,9 +292,10 @@ class Result:
         return self.finite and self.film_positive and self.finished
 
     def at(self, times, field: str = "force") -> np.ndarray:
-        """``field`` ("force", "film_min", "film_center") at any ``times`` in [t̄_start, t_end]."""
-        if field not in ("force", "film_min", "film_center"):
-            raise ValueError(f"field must be 'force', 'film_min' or 'film_center', got {field!r}")
+        """``field`` (force, film_min, film_center, gap, velocity, ...: any per-step series) at
+        any ``times`` in [t̄_start, t_end], by the stepper's interpolant."""
+        if field not in _SERIES[1:]:
+            raise ValueError(f"field must be one of {', '.join(_SERIES[1:])}; got {field!r}")
         times = _check_times(times, "times", float(self.t[0]), self.t_end)
         return np.asarray(evaluate(self.steps, times, field))
 
@@ -290,6 +313,8 @@ class Result:
 
 
 _COMPILED: dict = {}
+_SERIES = ("t", "force", "film_min", "film_center", "outflow", "gap", "velocity",
+           "elastic_energy", "dissipation")
 
 
 def _compiled_rollout(disc, history, tol: Tolerance, n_profiles: int):
@@ -317,6 +342,7 @@ def relax(
     t_end: float = 5.0,
     *,
     history: RampHold | SampledTravel | None = None,
+    drive=None,
     settings: Settings | None = None,
     profile_times=(),
     check: str = "raise",
@@ -329,6 +355,8 @@ def relax(
             costs a few hundred steps.
         history: indenter travel, ``RampHold()`` (eqs 8c,d; eq 23 with ``t_accel``) or
             ``SampledTravel`` (a measured history).
+        drive: instead of ``history``, any drive: ``Travel(history)``, ``Load`` (force
+            control, creep), ``Spring`` (a sphere on a spring), ``FreeSphere`` (inertia).
         settings: tolerance and mesh (defaults: see :class:`Settings`).
         profile_times: times at which p̄, w̄, h̄ profiles are returned (by the stepper's
             interpolant: the steps do not depend on them).
@@ -339,7 +367,7 @@ def relax(
     check_parameters(beta, z0)
     if check not in ("raise", "warn", "flag"):
         raise ValueError(f"check must be 'raise', 'warn' or 'flag', got {check!r}")
-    history = RampHold() if history is None else history
+    history = _drive_of(history, drive)
     settings = Settings() if settings is None else settings
     t_start = float(history.t_start)
     t_end = _check_t_end(t_end, t_start)
@@ -368,22 +396,23 @@ def relax(
 
     steps = traj.steps
     keep = np.asarray(steps.accepted)
-    series = {k: np.asarray(getattr(steps, k))[keep] for k in
-              ("t", "force", "film_min", "film_center", "outflow")}
+    series = {k: np.asarray(getattr(steps, k))[keep] for k in _SERIES}
     p = np.asarray(traj.profiles)
-    z = float(z0) - np.asarray(history.travel(ptimes)) if ptimes.size else np.zeros(0)
+    z = np.asarray(traj.profile_gaps)
     w = np.stack([np.asarray(displacement(disc, pi)) for pi in p]) if ptimes.size else p
     h = (
         np.stack([np.asarray(film_thickness(disc, zi, pi)) for zi, pi in zip(z, p)])
         if ptimes.size else p
     )
-    if settings.error_estimate:
-        coarse_f, loose_f = (np.asarray(evaluate(tr.steps, series["t"])) for tr in trajs[1:])
-        force_error = np.abs(series["force"] - coarse_f) / 3 + np.abs(coarse_f - loose_f) / (
-            8 ** (2 / 3) - 1
-        )
-    else:
-        force_error = np.full_like(series["force"], np.nan)
+    def estimate(field):
+        """Space: |y - y_coarse|/3 (second order, nested mesh of every other node); time:
+        |y_coarse - y_coarse(8 rtol)|/(8^{2/3} - 1) (global error ∝ rtol^{2/3})."""
+        if not settings.error_estimate:
+            return np.full_like(series[field], np.nan)
+        coarse, loose = (np.asarray(evaluate(tr.steps, series["t"], field)) for tr in trajs[1:])
+        return np.abs(series[field] - coarse) / 3 + np.abs(coarse - loose) / (8 ** (2 / 3) - 1)
+
+    force_error, gap_error = estimate("force"), estimate("gap")
     status = int(traj.status)
     finished = status == DONE
     if finished:
@@ -413,6 +442,7 @@ def relax(
         finished=finished,
         stop_reason=reason,
         force_error=force_error,
+        gap_error=gap_error,
         accepted=int(traj.accepted),
         rejected=int(traj.rejected),
         compile_s=compile_s,

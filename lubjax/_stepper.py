@@ -48,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _controller as ctrl
+from ._drives import as_drive
 from ._influence import force_weights, influence_matrix
 from ._mesh import Mesh
 
@@ -135,6 +136,10 @@ class State(NamedTuple):
     film_prev2: jax.Array
     gap: jax.Array  # z̄ⁿ
     gap_prev: jax.Array
+    velocity: jax.Array  # dz̄/dt̄ at level n by the step's BDF formula (a free sphere's state)
+    velocity_prev: jax.Array
+    velocity_prev2: jax.Array
+    velocity_peak: jax.Array  # max |v̄| so far
     force: jax.Array  # F̄ⁿ
     force_prev: jax.Array
     force_prev2: jax.Array
@@ -149,6 +154,7 @@ class State(NamedTuple):
     entry: jax.Array  # index of the output entry of level n, and of n-1
     entry_prev: jax.Array
     profiles: jax.Array  # p̄ at the requested profile times (P, N)
+    profile_gaps: jax.Array  # z̄ at the requested profile times (P,)
 
 
 class Step(NamedTuple):
@@ -160,6 +166,10 @@ class Step(NamedTuple):
     film_center: jax.Array  # h̄ at r̄ = 0
     film_min: jax.Array  # min_i h̄_i
     outflow: jax.Array  # volume flux out through the last face, per unit 2π
+    gap: jax.Array  # z̄ (the sphere's position; its approach is z̄0 - z̄)
+    velocity: jax.Array  # dz̄/dt̄ (BDF derivative of the step; the free sphere's velocity)
+    elastic_energy: jax.Array  # Ū = π Σ A_i p̄_i (Ŵp̄)_i = ½ ∫ p̄ (-w̄) dĀ, units F_s d_c
+    dissipation: jax.Array  # viscous power D̄ = 2π Σ_faces g (Δp̄)², same units per t_c
     accepted: jax.Array  # this entry is a new accepted level
     stencil: jax.Array  # entries of levels n-1 and n (for the interpolant), (2,)
     linear: jax.Array  # interpolate linearly (a backward-Euler step)
@@ -170,6 +180,7 @@ class Trajectory(NamedTuple):
 
     steps: Step  # leading axis: max_steps + 1 entries
     profiles: jax.Array  # p̄ at the requested times, (P, N)
+    profile_gaps: jax.Array  # z̄ at the requested times, (P,)
     status: jax.Array
     accepted: jax.Array
     rejected: jax.Array
@@ -223,32 +234,49 @@ def face_mobility(disc: Discretisation, film, film_prev, gap, gap_prev, omega):
     return 6.0 / (inv_k[:-1] + 4.0 * inv_mid + inv_k[1:])
 
 
-def linear_step(disc: Discretisation, beta, k_face, dt, a0, gap_rate, known_pressure, z_next):
-    """Solve A (a0 h̄ⁿ⁺¹ + a1 h̄ⁿ + a2 h̄ⁿ⁻¹)/Δt = β T(k) p̄ⁿ⁺¹ for p̄ⁿ⁺¹, h̄ = z̄ + r̄²/2 + Ŵp̄.
+def linear_step(disc: Discretisation, beta, k_face, dt, a0, gap_history_rate, known_pressure, row):
+    """One step: solve for (p̄ⁿ⁺¹, Δz̄), Δz̄ = z̄ⁿ⁺¹ - z̄ⁿ, from the N-1 Reynolds rows
 
-    ``gap_rate`` = a0 z̄ⁿ⁺¹ + a1 z̄ⁿ + a2 z̄ⁿ⁻¹ and ``known_pressure`` = a1 p̄ⁿ + a2 p̄ⁿ⁻¹.
-    Since a0 + a1 + a2 = 0 the r̄²/2 terms cancel exactly, so the right-hand side is assembled
-    from the gap rate and the elastic part alone: no O(1) film values cancel, and a decaying
-    pressure (F̄ → 10⁻¹⁰⁰ in a long hold at z̄0 > 1) keeps its relative accuracy and its sign.
-    The flux operator T is tridiagonal with face conductances g_{i+1/2} = β r̄ k/Δr̄:
-    (Tp̄)_i = g_{i+1/2}(p̄_{i+1} - p̄_i) - g_{i-1/2}(p̄_i - p̄_{i-1}).
-    Unknowns p̄_0..p̄_{N-2}; p̄_{N-1} = 0 (eq 22b). Returns (p̄ⁿ⁺¹, h̄ⁿ⁺¹, outflow).
+        A (a₀Δz̄ - a₂Δz̄ⁿ + Ŵ(a₀p̄ⁿ⁺¹ + a₁p̄ⁿ + a₂p̄ⁿ⁻¹))/Δt = β T(k) p̄ⁿ⁺¹
+
+    (the BDF form of (R) in :mod:`lubjax._drives`, a₁ = -(a₀ + a₂), so a₀z̄ⁿ⁺¹ + a₁z̄ⁿ + a₂z̄ⁿ⁻¹
+    = a₀Δz̄ - a₂Δz̄ⁿ) and the drive's row α c·p̄ⁿ⁺¹ + s Δz̄ = b, ``row = (α, s, b)``.
+
+    ``gap_history_rate`` = -a₂Δz̄ⁿ and ``known_pressure`` = a₁p̄ⁿ + a₂p̄ⁿ⁻¹. The r̄²/2 terms of
+    h̄ cancel exactly (Σa = 0), so the right-hand side holds only differences of the gap and the
+    elastic part: no O(1) film values cancel, and a decaying pressure (F̄ → 10⁻¹⁰⁰ in a long hold
+    at z̄0 > 1) keeps its relative accuracy and its sign. The flux operator T is tridiagonal with
+    face conductances g_{i+1/2} = β r̄ k/Δr̄: (Tp̄)_i = g_{i+1/2}(p̄_{i+1} - p̄_i) - g_{i-1/2}(p̄_i -
+    p̄_{i-1}). Unknowns p̄_0..p̄_{N-2} (p̄_{N-1} = 0, eq 22b) and Δz̄: one N×N dense solve.
+    With a prescribed travel the row is (0, 1, b): partial pivoting never picks it before the
+    last column, so Δz̄ = b exactly. Returns (p̄ⁿ⁺¹, Δz̄, outflow, conductances g).
     """
     g = beta * disc.face_r * k_face / disc.face_gap
     n = disc.r.shape[0] - 1
     idx = jnp.arange(n)
     off = jnp.arange(n - 1)
     diag = g[:n] + jnp.concatenate([jnp.zeros(1, g.dtype), g[: n - 1]])
-    matrix = (a0 / dt) * disc.area_influence
-    matrix = matrix.at[idx, idx].add(diag)
-    matrix = matrix.at[off, off + 1].add(-g[: n - 1]).at[off + 1, off].add(-g[: n - 1])
-    rate = gap_rate + disc.influence @ known_pressure
-    rhs = -(disc.cell_area * rate / dt)[:-1]
-    p_inner = jnp.linalg.solve(matrix, rhs)
-    p = jnp.concatenate([p_inner, jnp.zeros(1, p_inner.dtype)])
-    h_next = film_thickness(disc, z_next, p)
+    block = (a0 / dt) * disc.area_influence
+    block = block.at[idx, idx].add(diag)
+    block = block.at[off, off + 1].add(-g[: n - 1]).at[off + 1, off].add(-g[: n - 1])
+    area = disc.cell_area[:-1]
+    alpha, s, b = row
+    dtype = block.dtype
+    matrix = jnp.concatenate(
+        [
+            jnp.concatenate([block, ((a0 / dt) * area)[:, None]], axis=1),
+            jnp.concatenate(
+                [alpha * disc.force_weights[None, :-1], jnp.reshape(s, (1, 1))], axis=1
+            ).astype(dtype),
+        ],
+        axis=0,
+    )
+    rate = gap_history_rate + disc.influence @ known_pressure
+    rhs = jnp.concatenate([-(area * rate[:-1] / dt), jnp.reshape(b, (1,)).astype(dtype)])
+    x = jnp.linalg.solve(matrix, rhs)
+    p = jnp.concatenate([x[:-1], jnp.zeros(1, x.dtype)])
     outflow = -g[-1] * (p[-1] - p[-2])
-    return p, h_next, outflow
+    return p, x[-1], outflow, g
 
 
 def _bdf_coefficients(order, omega):
@@ -284,14 +312,16 @@ def _restart_step(tol: Tolerance, beta):
     return tol.initial_step / jnp.maximum(1.0, beta)
 
 
-def _initial_state(disc, beta, z0, t_start, tol: Tolerance, profile_times) -> State:
+def _initial_state(disc, beta, drive, z0, tol: Tolerance, profile_times) -> State:
     zero = jnp.zeros_like(disc.r)
-    h = film_thickness(disc, z0, zero)
     dtype = disc.r.dtype
     scalar = functools.partial(jnp.asarray, dtype=dtype)
     integer = functools.partial(jnp.asarray, dtype=jnp.int32)
+    z_start = scalar(drive.initial_gap(z0))
+    h = film_thickness(disc, z_start, zero)
+    v0 = scalar(drive.initial_velocity())
     return State(
-        t=scalar(t_start),
+        t=scalar(drive.t_start),
         dt_prev=scalar(1.0),
         dt_prev2=scalar(1.0),
         pressure=zero,
@@ -299,8 +329,12 @@ def _initial_state(disc, beta, z0, t_start, tol: Tolerance, profile_times) -> St
         film=h,
         film_prev=h,
         film_prev2=h,
-        gap=scalar(z0),
-        gap_prev=scalar(z0),
+        gap=z_start,
+        gap_prev=z_start,
+        velocity=v0,
+        velocity_prev=v0,
+        velocity_prev2=v0,
+        velocity_peak=jnp.abs(v0),
         force=scalar(0.0),
         force_prev=scalar(0.0),
         force_prev2=scalar(0.0),
@@ -315,26 +349,33 @@ def _initial_state(disc, beta, z0, t_start, tol: Tolerance, profile_times) -> St
         entry=integer(0),
         entry_prev=integer(0),
         profiles=jnp.zeros((profile_times.shape[0], disc.r.shape[0]), dtype),
+        # (the initial state answers profile times at t̄_start)
+        profile_gaps=jnp.full((profile_times.shape[0],), z_start, dtype),
     )
 
 
-def _entry_of(state: State, outflow, accepted, linear, stencil) -> Step:
+def _entry_of(disc, state: State, outflow, dissipation, accepted, linear, stencil) -> Step:
+    elastic = state.film - state.gap - 0.5 * disc.r**2  # Ŵp̄ = -w̄
     return Step(
         t=state.t,
         force=state.force,
         film_center=state.film[0],
         film_min=jnp.min(state.film),
         outflow=outflow,
+        gap=state.gap,
+        velocity=state.velocity,
+        elastic_energy=jnp.pi * jnp.sum(disc.cell_area * state.pressure * elastic),
+        dissipation=dissipation,
         accepted=accepted,
         stencil=stencil,
         linear=linear,
     )
 
 
-def _attempt(disc, beta, z0, history, t_end, tol: Tolerance, profile_times, state: State, k):
+def _attempt(disc, beta, z0, drive, t_end, tol: Tolerance, profile_times, state: State, k):
     """Attempt one step from ``state``; returns the new state and output entry ``k + 1``."""
     t = state.t
-    target = _next_breakpoint(history.breakpoints_array(), t, t_end)
+    target = _next_breakpoint(drive.breakpoints_array(), t, t_end)
     lands = state.dt_next >= target - t
     t_new = jnp.where(lands, target, t + state.dt_next)
     dt = t_new - t
@@ -346,22 +387,31 @@ def _attempt(disc, beta, z0, history, t_end, tol: Tolerance, profile_times, stat
     omega = jnp.where(order == 2, dt / dt1, 0.0)
     a0, a1, a2 = _bdf_coefficients(order, omega)
     k_face = face_mobility(disc, state.film, state.film_prev, state.gap, state.gap_prev, omega)
-    z_new = z0 - history.travel(t_new)
-    # a0 z̄ⁿ⁺¹ + a1 z̄ⁿ + a2 z̄ⁿ⁻¹ written with differences (a1 = -(a0 + a2)): exactly zero when
-    # the sphere is at rest (also under FMA contraction), so a quiet stretch gives exactly zero
-    # pressure, not rounding/Δt.
-    gap_rate = a0 * (z_new - state.gap) - a2 * (state.gap - state.gap_prev)
-    known_pressure = a1 * state.pressure + a2 * state.pressure_prev
-    p, h, outflow = linear_step(disc, beta, k_face, dt, a0, gap_rate, known_pressure, z_new)
-    force = disc.force_weights @ p
-
-    # Embedded error estimate (Milne's device) on the film at every node and on the force.
-    factor = ctrl.milne_factor(order, dt, dt1, dt2, a0, a1, a2)
-    h_pred = ctrl.extrapolate(order, dt, dt1, dt2, state.film, state.film_prev, state.film_prev2)
-    f_pred = ctrl.extrapolate(
-        order, dt, dt1, dt2, state.force, state.force_prev, state.force_prev2
+    step_before = state.gap - state.gap_prev
+    row = drive.row(
+        t_new, z0, dt, a0, a1, a2, state.gap, state.gap_prev, state.velocity, state.velocity_prev
     )
+    known_pressure = a1 * state.pressure + a2 * state.pressure_prev
+    p, dz, outflow, g = linear_step(disc, beta, k_face, dt, a0, -a2 * step_before,
+                                    known_pressure, row)
+    z_new = state.gap + dz
+    h = film_thickness(disc, z_new, p)
+    force = disc.force_weights @ p
+    velocity = (a0 * dz - a2 * step_before) / dt
+    dissipation = 2.0 * jnp.pi * jnp.sum(g * (p[1:] - p[:-1]) ** 2)
+
+    # Embedded error estimate (Milne's device) on the film at every node, on F̄, and on the
+    # sphere's position and velocity where the drive leaves them free.
+    factor = ctrl.milne_factor(order, dt, dt1, dt2, a0, a1, a2)
+
+    def milne(new, y, y1, y2):
+        return factor * (new - ctrl.extrapolate(order, dt, dt1, dt2, y, y1, y2))
+
+    # A free gap z̄ (force control, spring, free sphere) is covered by the film's estimate:
+    # h̄ at r̄ = 0 contains it, held to rtol of the thinnest film.
+    h_err = milne(h, state.film, state.film_prev, state.film_prev2)
     scale_h = tol.atol + tol.rtol * jnp.maximum(jnp.abs(h), jnp.abs(state.film))
+    f_err = milne(force, state.force, state.force_prev, state.force_prev2)
     # The force is held to rtol relative to itself down to force_floor × its peak so far, and
     # to rtol × that floor below it. A decaying tail far below the peak is not resolvable
     # anyway: the solve's rounding (~1e-14 of the peak) made steps collapse at F̄ ~ 1e-10 of
@@ -372,16 +422,27 @@ def _attempt(disc, beta, z0, history, t_end, tol: Tolerance, profile_times, stat
     )
     # A force emerging from exactly zero (a quiet stretch) has no relative error to estimate
     # until it is nonzero; the film criterion covers that step. A start of motion should be a
-    # breakpoint of the history (the restart resolves it); SampledTravel finds it.
-    force_error = jnp.where(state.force != 0, jnp.abs(factor * (force - f_pred)) / scale_f, 0.0)
-    error = jnp.maximum(jnp.max(jnp.abs(factor * (h - h_pred)) / scale_h), force_error)
+    # breakpoint of the history (the restart resolves it); SampledTravel finds it. A prescribed
+    # force has no error of the solver's.
+    check_force = (state.force != 0) & (not drive.prescribes_force)
+    force_error = jnp.where(check_force, jnp.abs(f_err) / scale_f, 0.0)
+    error = jnp.maximum(jnp.max(jnp.abs(h_err) / scale_h), force_error)
+    if drive.inertia:
+        # The free sphere's velocity is a state of its own ODE: control it relative to the
+        # largest speed so far (it passes through zero at the turning point).
+        v_err = milne(velocity, state.velocity, state.velocity_prev, state.velocity_prev2)
+        scale_v = tol.atol + tol.rtol * jnp.maximum(
+            jnp.maximum(jnp.abs(velocity), jnp.abs(state.velocity)), state.velocity_peak
+        )
+        error = jnp.maximum(error, jnp.abs(v_err) / scale_v)
     error = jnp.where(state.since_restart == 0, 0.0, error)
     # Positivity is part of acceptance: a step that thins the film through zero (or gives NaN)
-    # is retried shorter. So is a negative force (beyond roundoff of the peak): under a
-    # prescribed approach or hold the film is only squeezed and its pressure pushes back (no
-    # cavitation model). BDF2 would otherwise overshoot a fast-decaying force below zero.
+    # is retried shorter. So is a negative force (beyond roundoff of the peak) where the drive
+    # only squeezes the film (a monotone approach or hold: its pressure pushes back, no
+    # cavitation model); BDF2 would otherwise overshoot a fast-decaying force below zero.
     roundoff = FORCE_ATOL + 1e-13 * jnp.maximum(state.force_peak, jnp.abs(force))
-    valid = jnp.all(jnp.isfinite(p)) & jnp.all(h > 0) & (force >= -roundoff)
+    negative_force = drive.force_nonnegative & (force < -roundoff)
+    valid = jnp.all(jnp.isfinite(p)) & jnp.isfinite(dz) & jnp.all(h > 0) & ~negative_force
     valid = valid & ~jnp.isnan(error)
     accept = valid & (error <= 1.0)
 
@@ -404,15 +465,21 @@ def _attempt(disc, beta, z0, history, t_end, tol: Tolerance, profile_times, stat
     floor = jnp.maximum(1e-12 * restart_step, 1e-13 * jnp.abs(t))
     too_small = ~accept & (dt_next < floor)
 
-    # Profiles requested in (t_n, t_{n+1}]: the step's interpolant of p̄.
+    # Profiles requested in (t_n, t_{n+1}]: the step's interpolant of p̄ and z̄.
     linear = order == 1
     in_step = accept & (profile_times > t) & (profile_times <= t_new)
-    p_at = jax.vmap(
-        lambda tq: _interpolate(
-            tq, t - dt1, t, t_new, state.pressure_prev, state.pressure, p, linear
-        )
-    )(profile_times)
-    profiles = jnp.where(in_step[:, None], p_at, state.profiles)
+
+    def interpolant(y_prev, y, y_new):
+        return jax.vmap(
+            lambda tq: _interpolate(tq, t - dt1, t, t_new, y_prev, y, y_new, linear)
+        )(profile_times)
+
+    profiles = jnp.where(
+        in_step[:, None], interpolant(state.pressure_prev, state.pressure, p), state.profiles
+    )
+    profile_gaps = jnp.where(
+        in_step, interpolant(state.gap_prev, state.gap, z_new), state.profile_gaps
+    )
 
     entry = k + 1
     new = State(
@@ -426,6 +493,10 @@ def _attempt(disc, beta, z0, history, t_end, tol: Tolerance, profile_times, stat
         film_prev2=state.film_prev,
         gap=z_new,
         gap_prev=state.gap,
+        velocity=velocity,
+        velocity_prev=state.velocity,
+        velocity_prev2=state.velocity_prev,
+        velocity_peak=jnp.maximum(state.velocity_peak, jnp.abs(velocity)),
         force=force,
         force_prev=state.force,
         force_prev2=state.force_prev,
@@ -440,6 +511,7 @@ def _attempt(disc, beta, z0, history, t_end, tol: Tolerance, profile_times, stat
         entry=jnp.asarray(entry, jnp.int32),
         entry_prev=state.entry,
         profiles=profiles,
+        profile_gaps=profile_gaps,
     )
     kept = state._replace(
         dt_next=dt_next,
@@ -449,22 +521,31 @@ def _attempt(disc, beta, z0, history, t_end, tol: Tolerance, profile_times, stat
     )
     out_state = jax.tree_util.tree_map(lambda a, b: jnp.where(accept, a, b), new, kept)
     stencil = jnp.stack([state.entry_prev, state.entry])
-    out = _entry_of(out_state, jnp.where(accept, outflow, 0.0), accept, linear & accept, stencil)
+    out = _entry_of(
+        disc,
+        out_state,
+        jnp.where(accept, outflow, 0.0),
+        jnp.where(accept, dissipation, 0.0),
+        accept,
+        linear & accept,
+        stencil,
+    )
     return out_state, out
 
 
-def _idle(state: State, k):
+def _idle(disc, state: State, k):
     """An attempt after the run ended: nothing changes."""
     stencil = jnp.stack([state.entry_prev, state.entry])
     no = jnp.asarray(False)
-    return state, _entry_of(state, jnp.zeros_like(state.t), no, no, stencil)
+    zero = jnp.zeros_like(state.t)
+    return state, _entry_of(disc, state, zero, zero, no, no, stencil)
 
 
 def rollout(
     disc: Discretisation,
     beta,
     z0,
-    history,
+    drive,
     t_end,
     tol: Tolerance = DEFAULT_TOLERANCE,
     profile_times=None,
@@ -473,11 +554,12 @@ def rollout(
 ) -> Trajectory:
     """Integrate a run from rest to ``t_end`` with error control.
 
-    Pure and jit/vmap/jvp-compatible in ``beta``, ``z0``, ``t_end`` and the arrays of ``history``
-    (any object with ``travel(t)``, ``breakpoints_array()`` and ``t_start``, e.g. ``RampHold``
-    or ``SampledTravel``: both are pytrees). ``mode="reverse"`` also supports vjp / ``jax.grad``
-    (a checkpointed scan over ``tol.max_steps`` attempts). Read values at any times with
-    :func:`evaluate`.
+    ``drive``: what moves the sphere (:mod:`lubjax._drives`: ``Travel``, ``Load``, ``Spring``,
+    ``FreeSphere``), or a bare travel history (``RampHold``, ``SampledTravel``) for a prescribed
+    travel. Every drive takes this one code path. Pure and jit/vmap/jvp-compatible in ``beta``,
+    ``z0``, ``t_end`` and the drive's leaves. ``mode="reverse"`` also supports vjp /
+    ``jax.grad`` (a checkpointed scan over ``tol.max_steps`` attempts). Read values at any
+    times with :func:`evaluate`.
     """
     if mode not in ("forward", "reverse"):
         raise ValueError(f"mode must be 'forward' or 'reverse', got {mode!r}")
@@ -487,17 +569,19 @@ def rollout(
     profile_times = (
         jnp.zeros((0,), dtype) if profile_times is None else jnp.asarray(profile_times, dtype)
     )
+    drive = as_drive(drive)
     # At rest at t_start, where the travel need not be zero (eq 23 starts t̄₁/2 above z̄0; a
     # measured history starts wherever its first sample is).
-    z_start = z0 - history.travel(history.t_start)
-    state0 = _initial_state(disc, beta, z_start, history.t_start, tol, profile_times)
+    state0 = _initial_state(disc, beta, drive, z0, tol, profile_times)
+    zero = jnp.zeros((), dtype)
     first = _entry_of(
-        state0, jnp.zeros((), dtype), jnp.asarray(True), jnp.asarray(False), jnp.zeros(2, jnp.int32)
+        disc, state0, zero, zero, jnp.asarray(True), jnp.asarray(False), jnp.zeros(2, jnp.int32)
     )
-    attempt = functools.partial(_attempt, disc, beta, z0, history, t_end, tol, profile_times)
+    attempt = functools.partial(_attempt, disc, beta, z0, drive, t_end, tol, profile_times)
+    idle = functools.partial(_idle, disc)
 
     def body(state, k):
-        return jax.lax.cond(state.status == RUNNING, attempt, _idle, state, k)
+        return jax.lax.cond(state.status == RUNNING, attempt, idle, state, k)
 
     n = tol.max_steps
     if mode == "reverse":
@@ -528,6 +612,7 @@ def rollout(
     return Trajectory(
         steps=steps,
         profiles=final.profiles,
+        profile_gaps=final.profile_gaps,
         status=final.status,
         accepted=final.accepted,
         rejected=final.rejected,

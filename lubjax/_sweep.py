@@ -113,7 +113,7 @@ def sweep(
     bp = np.concatenate([b, np.full(pad, b[-1])])
     zp = np.concatenate([z, np.full(pad, z[-1])])
     chunk = bp.size // n_dev
-    shared = (plan.disc, plan.history, plan.t_end, plan.t)
+    shared = (plan.disc, plan.drive, plan.t_end, plan.t)
     used = jax.devices()[:n_dev]
     per_device = [
         jax.device_put((*shared, bp[k * chunk:(k + 1) * chunk], zp[k * chunk:(k + 1) * chunk]), d)

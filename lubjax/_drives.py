@@ -1,0 +1,285 @@
+r"""Drives: what moves the sphere. A scene picks exactly one.
+
+The semi-discrete Reynolds equation (MODEL.md, "Drives") is
+
+    A (dz̄/dt̄ 1 + Ŵ dp̄/dt̄) = β T(h̄) p̄,                                   (R)
+
+N-1 rows for the pressures p̄_0..p̄_{N-2} (p̄_{N-1} = 0). The gap z̄ is one more unknown, so every
+drive adds exactly one row, linear in (p̄ⁿ⁺¹, Δz̄), Δz̄ = z̄ⁿ⁺¹ - z̄ⁿ, of the form
+
+    α F̄ⁿ⁺¹ + s Δz̄ = b,        F̄ⁿ⁺¹ = c·p̄ⁿ⁺¹ (eq 11b),
+
+and each attempted step stays one (N)×(N) linear solve (the paper's Appendix does the same with
+two extra rows, z̄ and its velocity; we eliminate the velocity through the BDF formula). The
+step's time derivative is the BDF formula a₀yⁿ⁺¹ + a₁yⁿ + a₂yⁿ⁻¹ = Δt̄ ẏⁿ⁺¹ (a₁ = -(a₀ + a₂)).
+
+* :class:`Travel` — the travel d̄(t̄) is prescribed (the relaxation test, eqs 8c,d, or a
+  measured history): α = 0, s = 1, b = z̄0 - d̄(tⁿ⁺¹) - z̄ⁿ. The solve returns Δz̄ = b exactly.
+* :class:`Load` — the force is prescribed (force control, the paper's Appendix; creep):
+  α = 1, s = 0, b = F̄(tⁿ⁺¹).
+* :class:`Spring` — the sphere hangs on a spring of dimensionless stiffness K̄ from a stage
+  whose travel d̄(t̄) is prescribed; the spring carries the film force,
+  F̄ = K̄ (d̄(t̄) - (z̄0 - z̄)), i.e. the sphere lags the stage by F̄/K̄: α = 1, s = -K̄,
+  b = K̄ (d̄(tⁿ⁺¹) - z̄0 + z̄ⁿ). K̄ → ∞ is :class:`Travel`.
+* :class:`FreeSphere` — a sphere with inertia, dz̄/dt̄ = v̄, dv̄/dt̄ = G (F̄ - W̄) (Davis, Serayssol
+  & Hinch 1986). The film force pushes the sphere away (F̄ > 0) and W̄ (its weight less
+  buoyancy, or any constant load toward the substrate) pushes it in. BDF for both equations,
+  v̄ⁿ⁺¹ = (a₀Δz̄ - a₂Δz̄ⁿ)/Δt̄ (Δz̄ⁿ = z̄ⁿ - z̄ⁿ⁻¹) substituted in the second, times Δt̄:
+  α = -Δt̄² G, s = a₀², b = a₀a₂Δz̄ⁿ - Δt̄ (a₁v̄ⁿ + a₂v̄ⁿ⁻¹) - Δt̄² G W̄.
+  No cavitation: on rebound the pressure turns negative and stays in the model, as in Davis
+  et al.
+
+Dimensionless numbers, all with the relaxation test's scales (MODEL.md eq 7): lengths d_c,
+time t_c, force F_s = 2E* d_c^{3/2} √R/π (F = F_s F̄), so that β keeps its meaning as
+E* d_c^{5/2} t_c/(6π η R^{3/2} d_c). Which d_c and t_c a scene uses is its choice (the SI layer,
+:mod:`lubjax._units`, says which): for creep under a load F0 ramped in t_r it takes d_c = the Hertz
+indentation δ∞ = (3F0/(4E*√R))^{2/3} and t_c = t_r, so the load's plateau is F̄ = 2π/3 and the
+gap tends to z̄ = -1; for a collision d_c = the initial gap x0 and t_c = x0/V. Then
+
+    K̄ = k d_c / F_s = π k / (2E* √(R d_c)),    G = F_s t_c² / (m d_c) = 2β/(π St),
+    St = m V/(6π η R²) (V = d_c/t_c),          W̄ = W / F_s.
+
+Every drive is a pytree: its numbers (K̄, G, W̄, v̄0, the load's scale, a sampled history's
+arrays) are leaves, so they can be differentiated, fitted and batched like β and z̄0.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._indenter import RampHold
+
+
+def _check_history(history, name):
+    if not (hasattr(history, "travel") and hasattr(history, "breakpoints_array")):
+        raise TypeError(
+            f"{name} must be a history such as lubjax.RampHold() or lubjax.SampledTravel(t, "
+            f"values), got {type(history).__name__}"
+        )
+
+
+def _is_concrete(x):
+    return not isinstance(x, jax.core.Tracer)
+
+
+def _check_number(name, value, lo=None, hi=None, lo_open=False):
+    """Validate a concrete scalar (tracers pass: they were validated when built)."""
+    if not _is_concrete(value):
+        return
+    if isinstance(value, bool) or np.ndim(value) != 0:
+        raise ValueError(f"{name} must be a scalar number, got {value!r}")
+    v = float(value)
+    if not np.isfinite(v):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if lo is not None and (v <= lo if lo_open else v < lo):
+        raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo:g}, got {value!r}")
+    if hi is not None and v > hi:
+        raise ValueError(f"{name} must be <= {hi:g}, got {value!r}")
+
+
+class _Drive:
+    """What the stepper asks of a drive (all methods are pure and traceable).
+
+    Static flags: ``prescribes_gap`` (the gap's error is not the solver's, skip it in the error
+    estimate), ``prescribes_force`` (likewise for F̄), ``inertia`` (the velocity is a state of
+    the ODE: include it in the error estimate), ``force_nonnegative`` (a negative F̄ beyond
+    roundoff is an error of the step, not physics: true only for a monotone approach).
+    """
+
+    prescribes_gap = False
+    prescribes_force = False
+    inertia = False
+    force_nonnegative = False
+
+    @property
+    def t_start(self):
+        return self.history.t_start
+
+    def breakpoints_array(self):
+        return self.history.breakpoints_array()
+
+    def initial_gap(self, z0):
+        """z̄ at t̄_start, the sphere at rest."""
+        return z0 - self.history.travel(self.history.t_start)
+
+    def initial_velocity(self):
+        return 0.0
+
+    def row(self, t_new, z0, dt, a0, a1, a2, gap, gap_prev, velocity, velocity_prev):
+        """(α, s, b) of the closing row α F̄ⁿ⁺¹ + s Δz̄ = b."""
+        raise NotImplementedError
+
+
+def _monotone_approach(history):
+    """Whether the history never retracts (a traced boolean for a sampled one)."""
+    return getattr(history, "monotone", False)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Travel(_Drive):
+    """Prescribed travel d̄(t̄) toward the substrate: z̄ = z̄0 - d̄(t̄) (eqs 8c,d). The default
+    drive; ``relax(history=...)`` wraps its history in it."""
+
+    history: object = dataclasses.field(default_factory=RampHold)
+    prescribes_gap = True
+
+    def __post_init__(self):
+        _check_history(self.history, "Travel(history)")
+
+    @property
+    def force_nonnegative(self):
+        # Under a monotone approach or hold the film is only squeezed: its pressure pushes back.
+        return _monotone_approach(self.history)
+
+    def row(self, t_new, z0, dt, a0, a1, a2, gap, gap_prev, velocity, velocity_prev):
+        # z̄0 - d̄(tⁿ⁺¹) - z̄ⁿ: exactly zero while the sphere rests (z̄ⁿ was computed the same way).
+        return 0.0, 1.0, (z0 - self.history.travel(t_new)) - gap
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Load(_Drive):
+    """Prescribed force F̄(t̄) = ``scale`` × ``history``(t̄) (force control, creep).
+
+    ``history``: the load's shape, any history (``RampHold()``: ramp from 0 to 1 over t̄ ∈ [0, 1],
+    then held; ``SampledTravel(t, values)``: a sampled load, monotone-cubic interpolated). The
+    sphere starts at rest at z̄0 under the load F̄(t̄_start) (normally 0).
+    """
+
+    scale: float = 2.0 * np.pi / 3.0
+    history: object = dataclasses.field(default_factory=RampHold)
+    prescribes_force = True
+
+    def __post_init__(self):
+        _check_number("Load.scale", self.scale, 0.0, lo_open=True)
+        _check_history(self.history, "Load(history)")
+
+    def initial_gap(self, z0):
+        return z0
+
+    def load(self, t):
+        return self.scale * self.history.travel(t)
+
+    def row(self, t_new, z0, dt, a0, a1, a2, gap, gap_prev, velocity, velocity_prev):
+        return 1.0, 0.0, self.load(t_new)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Spring(_Drive):
+    """A stage with prescribed travel d̄(t̄) holds the sphere through a spring of stiffness K̄
+    (``stiffness``, units F_s/d_c: K̄ = π k/(2E*√(R d_c))). The sphere lags the stage by F̄/K̄."""
+
+    stiffness: float = 1.0
+    history: object = dataclasses.field(default_factory=RampHold)
+
+    def __post_init__(self):
+        _check_number("Spring.stiffness", self.stiffness, 0.0, lo_open=True)
+        _check_history(self.history, "Spring(history)")
+
+    @property
+    def force_nonnegative(self):
+        return _monotone_approach(self.history)
+
+    def row(self, t_new, z0, dt, a0, a1, a2, gap, gap_prev, velocity, velocity_prev):
+        k = self.stiffness
+        return 1.0, -k, k * (self.history.travel(t_new) - (z0 - gap))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class FreeSphere(_Drive):
+    """A free sphere with inertia: dz̄/dt̄ = v̄, dv̄/dt̄ = G (F̄ - W̄).
+
+    Args:
+        inverse_mass: G = F_s t_c²/(m d_c) = 2β/(π St) with St = m V/(6π η R²), V = d_c/t_c.
+        velocity: v̄0, the initial dz̄/dt̄ (negative: approaching; -1 with t_c = x0/V).
+        weight: W̄ = W/F_s, a constant load toward the substrate (weight less buoyancy; 0 for
+            a collision without gravity).
+    It starts at z̄0 with the film at rest (p̄ = 0). No velocity jumps: no breakpoints.
+    """
+
+    inverse_mass: float = 1.0
+    velocity: float = -1.0
+    weight: float = 0.0
+    inertia = True
+
+    def __post_init__(self):
+        _check_number("FreeSphere.inverse_mass", self.inverse_mass, 0.0, lo_open=True)
+        _check_number("FreeSphere.velocity", self.velocity)
+        _check_number("FreeSphere.weight", self.weight, 0.0)
+
+    @property
+    def t_start(self):
+        return 0.0
+
+    def breakpoints_array(self):
+        return jnp.zeros((0,))
+
+    def initial_gap(self, z0):
+        return z0
+
+    def initial_velocity(self):
+        return self.velocity
+
+    def row(self, t_new, z0, dt, a0, a1, a2, gap, gap_prev, velocity, velocity_prev):
+        g = self.inverse_mass
+        b = a0 * a2 * (gap - gap_prev) - dt * (a1 * velocity + a2 * velocity_prev)
+        return -(dt**2) * g, a0**2, b - dt**2 * g * self.weight
+
+
+def restitution(result, at_gap: float = 1.0) -> float:
+    """Coefficient of restitution of a :class:`FreeSphere` run: e = v̄/|v̄0| when the sphere,
+    moving away, first passes back through the gap ``at_gap`` (default z̄ = 1, its starting gap
+    x0 with the collision scales, as Davis et al. read it). NaN if it does not get back there
+    (no rebound, or the run ended first). The crossing is found on the stepper's interpolant
+    (bisection between the accepted steps that bracket it)."""
+    t, gap, v = (np.asarray(a, float) for a in (result.t, result.gap, result.velocity))
+    k = np.flatnonzero((gap[:-1] < at_gap) & (gap[1:] >= at_gap) & (v[1:] > 0))
+    if not k.size:
+        return float("nan")
+    lo, hi = t[k[0]], t[k[0] + 1]
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if result.at([mid], "gap")[0] < at_gap:
+            lo = mid
+        else:
+            hi = mid
+    return float(result.at([hi], "velocity")[0] / abs(v[0]))
+
+
+def as_drive(drive_or_history) -> _Drive:
+    """A drive, or a bare history (RampHold, SampledTravel) taken as a prescribed travel."""
+    if drive_or_history is None:
+        return Travel()
+    if isinstance(drive_or_history, _Drive):
+        return drive_or_history
+    if hasattr(drive_or_history, "travel"):
+        return Travel(drive_or_history)
+    raise TypeError(
+        "expected a drive (lubjax.Travel, Load, Spring, FreeSphere) or a travel history "
+        f"(lubjax.RampHold, SampledTravel), got {type(drive_or_history).__name__}"
+    )
+
+
+def _register(cls, leaves, static=()):
+    def flatten(d):
+        return tuple(getattr(d, n) for n in leaves), tuple(getattr(d, n) for n in static)
+
+    def unflatten(aux, children):
+        obj = object.__new__(cls)
+        for n, v in zip(leaves, children):
+            object.__setattr__(obj, n, v)
+        for n, v in zip(static, aux):
+            object.__setattr__(obj, n, v)
+        return obj
+
+    jax.tree_util.register_pytree_node(cls, flatten, unflatten)
+
+
+# The histories are pytrees themselves (leaves: a sampled history's arrays).
+_register(Travel, ("history",))
+_register(Load, ("scale", "history"))
+_register(Spring, ("stiffness", "history"))
+_register(FreeSphere, ("inverse_mass", "velocity", "weight"))

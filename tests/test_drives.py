@@ -1,0 +1,175 @@
+"""Drives against truth: a stiff spring is a prescribed travel, creep of a rigid film has a
+closed form, long creep reaches Hertz, a free sphere conserves energy and stops where Reynolds
+says, and every drive differentiates both ways."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.integrate import cumulative_trapezoid
+
+import lubjax
+
+# A coarser fine zone than the default keeps the suite fast; the tolerances below hold on it.
+FAST = lubjax.Settings(dr=0.03, error_estimate=False)
+DEFAULT = lubjax.Settings(error_estimate=False)
+
+
+def test_bare_history_is_a_travel_drive():
+    a = lubjax.relax(100, 0.5, 2.0, settings=FAST)
+    b = lubjax.relax(100, 0.5, 2.0, drive=lubjax.Travel(lubjax.RampHold()), settings=FAST)
+    np.testing.assert_array_equal(a.force, b.force)
+    # The gap is prescribed exactly: z̄ = z̄0 - d̄(t̄) at every step.
+    np.testing.assert_allclose(b.gap, 0.5 - np.clip(b.t, 0, 1), rtol=0, atol=1e-15)
+
+
+def test_stiff_spring_recovers_prescribed_travel():
+    """F̄ = K̄ (d̄ - (z̄0 - z̄)): the sphere lags the stage by F̄/K̄, so the force approaches the
+    prescribed-travel force like 1/K̄."""
+    times = np.linspace(0, 3, 61)
+    ref = lubjax.relax(100, 0.5, 3.0, settings=FAST).at(times)
+    err = []
+    for k in (1e3, 1e5):
+        run = lubjax.relax(100, 0.5, 3.0, drive=lubjax.Spring(k), settings=FAST)
+        # (the row holds to rounding of the O(1) travel and gap, times K̄)
+        np.testing.assert_allclose(run.force, k * (np.clip(run.t, 0, 1) - (0.5 - run.gap)),
+                                   rtol=1e-9, atol=k * 1e-14)
+        err.append(np.max(np.abs(run.at(times) - ref)) / ref.max())
+    assert err[0] < 3e-3
+    assert 50 < err[0] / err[1] < 200  # ∝ 1/K̄
+
+
+def _rigid_creep_gap(beta, load, t):
+    """Reynolds under a load ramped to F̄0 over t̄ ∈ [0, 1]: F̄ = π(-dz̄/dt̄)/(2βz̄) (MODEL.md),
+    so ln(z̄/z̄0) = -(2β/π) ∫F̄ dt̄."""
+    impulse = load * np.where(t < 1, t**2 / 2, t - 0.5)
+    return np.exp(-2 * beta / np.pi * impulse)
+
+
+def test_creep_of_a_rigid_film_follows_reynolds_and_converges():
+    """A light load on a stiff substrate (F̄0 = 1e-5: the elastic deflection is ~F̄0/z̄^{3/2})
+    against the closed form; the gap's error falls with rtol at BDF2's global order."""
+    load = 1e-5
+    beta = np.pi / (2 * load * 4.5)  # the gap falls by e over the run
+    times = np.linspace(0, 5, 51)
+    exact = _rigid_creep_gap(beta, load, times)
+    errors = []
+    for rtol in (1e-3, 1e-4):
+        # (the mesh from the tolerance: on a fixed coarse mesh its error floors near 4e-4)
+        s = lubjax.Settings(rtol=rtol, error_estimate=False)
+        run = lubjax.relax(beta, 1.0, 5.0, drive=lubjax.Load(load), settings=s)
+        np.testing.assert_allclose(run.force, load * np.clip(run.t, 0, 1), rtol=1e-9, atol=1e-18)
+        errors.append(np.max(np.abs(run.at(times, "gap") / exact - 1)))
+    assert errors[1] < 1e-3
+    slope = np.log10(errors[0] / errors[1])
+    assert 0.45 < slope < 1.2, errors  # rtol^{2/3} expected
+
+
+def test_long_creep_reaches_hertz():
+    """Under the load F̄0 = 2π/3 (d_c = the Hertz indentation) the film drains and z̄ → -1,
+    δ = (3F/(4E*√R))^{2/3}; the trapped film thins like t̄^{-1/2}."""
+    # (the default mesh: the trapped film's rim needs it, on dr = 0.03 the ratio is 2.3)
+    run = lubjax.relax(100, 0.5, 1e4, drive=lubjax.Load(), settings=DEFAULT)
+    excess = run.at([1e3, 1e4], "gap") + 1.0
+    assert 0 < excess[1] < 1e-3
+    assert 2.5 < excess[0] / excess[1] < 4.0  # √10 = 3.16
+    # The remaining approach is the trapped film: z̄ + δ̄ is of the order of h̄(0).
+    assert 0.3 < excess[1] / run.at([1e4], "film_center")[0] < 1.2
+
+
+def _energy_error(run, inverse_mass, weight=0.0):
+    energy = 0.5 * run.velocity**2 / inverse_mass + weight * run.gap + run.elastic_energy
+    dissipated = cumulative_trapezoid(run.dissipation, run.t, initial=0.0)
+    return np.max(np.abs(energy + dissipated - energy[0])) / energy[0]
+
+
+def test_free_sphere_conserves_energy_to_discretisation_accuracy():
+    """½v̄²/G + W̄z̄ + Ū + ∫D̄ dt̄ is constant (kinetic + weight + elastic + dissipated); its
+    error falls with the tolerance. A bounce with rebound (St = 100) under a weight."""
+    beta, st = 100.0, 100.0
+    g = 2 * beta / (np.pi * st)
+    errors = []
+    for rtol in (1e-3, 1e-4):
+        s = lubjax.Settings(rtol=rtol, dr=0.014, error_estimate=False)
+        run = lubjax.relax(beta, 1.0, 6.0, drive=lubjax.FreeSphere(g, -1.0, 0.05), settings=s)
+        assert run.velocity.max() > 0.3  # it rebounds
+        assert run.force.min() < 0  # suction on rebound (no cavitation)
+        errors.append(_energy_error(run, g, 0.05))
+    assert errors[1] < 4e-4
+    assert errors[1] < errors[0] / 2.5
+
+
+def test_free_sphere_on_a_stiff_wall_stops_where_reynolds_says():
+    """Rigid limit, no weight: m dv/dt = -6πηR² v/z integrates to v = V(1 + ln(z/x0)/St), so the
+    sphere stops at z = x0 e^{-St} and never rebounds (Davis et al. 1986)."""
+    beta, st = 1e4, 1.0
+    run = lubjax.relax(beta, 1.0, 10.0, drive=lubjax.FreeSphere(2 * beta / (np.pi * st)),
+                       settings=FAST)
+    assert run.gap.min() == pytest.approx(np.exp(-st), rel=2e-3)
+    assert run.velocity.max() <= 1e-9
+    # On the way in, v(z) follows the rigid law while the film is much thicker than the dent.
+    early = (run.t > 0.05) & (run.gap > 0.6)
+    v_rigid = -(1 + np.log(run.gap[early]) / st)
+    np.testing.assert_allclose(run.velocity[early], v_rigid, atol=5e-3)
+
+
+def test_restitution_rises_with_stokes_number():
+    beta = 1e4
+    rebound = []
+    for st in (1.0, 50.0, 500.0):
+        run = lubjax.relax(beta, 1.0, 8.0, drive=lubjax.FreeSphere(2 * beta / (np.pi * st)),
+                           settings=FAST)
+        rebound.append(max(run.velocity.max(), 0.0))
+    assert rebound[0] < 1e-6 < rebound[1] < rebound[2] < 1.0
+
+
+@pytest.mark.parametrize(
+    "drive",
+    [lubjax.Load(1.0), lubjax.Spring(5.0), lubjax.FreeSphere(20.0, -1.0, 0.1)],
+    ids=["load", "spring", "free"],
+)
+def test_drive_gradients_reverse_forward_and_differences(drive):
+    """d(gap at a few times)/d(β, the drive's number): reverse (checkpointed scan) = forward
+    (jvp) to 1e-6; forward = central differences of the adaptive solution. As in
+    test_stepper's check, ε is sized to the step-choice noise of the adaptive solution (jumps of
+    the order of the local error), not to eps: ε = 1e-3·|x| at rtol = 1e-9."""
+    times = jnp.array([0.5, 1.0, 2.0])
+    leaves, treedef = jax.tree_util.tree_flatten(drive)
+    p0 = jnp.array([50.0, float(leaves[0])])
+
+    def gaps_fn(rtol, mode):
+        settings = lubjax.Settings(rtol=rtol, dr=0.05, length=20.0, mesh_growth=1.2,
+                                   max_steps=100_000, error_estimate=False)
+        plan = lubjax.make_plan(2.0, drive=drive, settings=settings)
+
+        def gaps(p):
+            d = jax.tree_util.tree_unflatten(treedef, [p[1], *leaves[1:]])
+            traj = lubjax.rollout(plan.disc, p[0], 1.0, d, plan.t_end, plan.tol, mode=mode)
+            return lubjax.evaluate(traj.steps, times, "gap")
+
+        return gaps
+
+    rev = jax.jacrev(gaps_fn(1e-6, "reverse"))(p0)
+    fwd = jax.jacfwd(gaps_fn(1e-6, "forward"))(p0)
+    np.testing.assert_allclose(rev, fwd, rtol=1e-6, atol=1e-14)
+
+    f = jax.jit(gaps_fn(1e-9, "forward"))
+    jac = np.asarray(jax.jit(jax.jacfwd(f))(p0))
+    for j in range(2):
+        h = 1e-3 * float(p0[j])
+        step = jnp.zeros(2).at[j].set(h)
+        fd = (np.asarray(f(p0 + step)) - np.asarray(f(p0 - step))) / (2 * h)
+        assert np.max(np.abs(jac[:, j] - fd)) < 1e-3 * np.max(np.abs(fd)), (j, jac[:, j], fd)
+
+
+def test_bad_drive_input_is_refused():
+    with pytest.raises(ValueError, match="Spring.stiffness"):
+        lubjax.Spring(-1.0)
+    with pytest.raises(ValueError, match="Load.scale"):
+        lubjax.Load(float("nan"))
+    with pytest.raises(ValueError, match="FreeSphere.inverse_mass"):
+        lubjax.FreeSphere(0.0)
+    with pytest.raises(TypeError, match="history"):
+        lubjax.Load(1.0, history=3.0)
+    with pytest.raises(ValueError, match="either history"):
+        lubjax.relax(10, 0.5, history=lubjax.RampHold(), drive=lubjax.Load())
