@@ -30,7 +30,8 @@ from ._files import (
 PROG = "lubjax"
 DESCRIPTION = (
     "Simulate a soft lubricated contact with the lubjax solver: a rigid sphere pushed into a "
-    "soft elastic half-space through a viscous film, then held (a relaxation test). "
+    "soft elastic half-space through a viscous film, then held (relax), pressed under a load "
+    "(creep), or a free sphere colliding with it (bounce). "
     "Also available as: python -m lubjax"
 )
 EPILOG = EXIT_EPILOG.format(failed="solver error, or an output could not be written")
@@ -80,7 +81,276 @@ def _parser() -> Parser:
     r.add_argument("--out", help="write results as JSON here")
     r.add_argument("--plot", help="write a force / film figure here (.png, .pdf, .svg, ...)")
     add_debug_flag(r)
+
+    c = sub.add_parser(
+        "creep",
+        help="simulate a creep test: a load ramped and held (force control)",
+        description="A load ramped from 0 to --load in --ramp-time, held for --hold (or the "
+        "load history of --load-csv, columns time_s,force_N), on a sphere starting at rest at "
+        "--gap. Dimensionless numbers use d_c = the Hertz indentation under the (peak) load "
+        "and t_c = the ramp time (the time to the peak load for --load-csv).",
+        epilog=EPILOG,
+    )
+    _add_material(c)
+    c.add_argument("--load", type=positive_float, help="load F [N] (ramp-and-hold)")
+    c.add_argument("--ramp-time", type=positive_float, help="time to reach the load [s]")
+    c.add_argument("--hold", type=float, default=None, help="hold time after the ramp [s]")
+    c.add_argument("--load-csv", help="a load history instead: CSV with time_s,force_N")
+    c.add_argument("--gap", type=float, help="initial gap z0 [m]")
+    _add_accuracy(c)
+    add_debug_flag(c)
+
+    b = sub.add_parser(
+        "bounce",
+        help="simulate a free sphere colliding with the substrate through the film",
+        description="A sphere of --mass (or --density) approaching at --speed from the gap "
+        "--gap (Davis, Serayssol & Hinch 1986), optionally under --weight. Dimensionless "
+        "numbers use d_c = gap and t_c = gap/speed; the restitution coefficient is the speed "
+        "when the sphere passes back through the starting gap, over the approach speed.",
+        epilog=EPILOG,
+    )
+    _add_material(b)
+    b.add_argument("--mass", type=positive_float, help="sphere mass [kg]")
+    b.add_argument("--density", type=positive_float, help="sphere density [kg/m³] (or --mass)")
+    b.add_argument("--speed", type=positive_float, help="approach speed V [m/s]")
+    b.add_argument("--gap", type=float, help="initial gap x0 [m]")
+    b.add_argument("--weight", type=float, default=0.0,
+                   help="constant force toward the wall [N] (weight less buoyancy; default 0)")
+    b.add_argument("--t-end", type=positive_float, default=None,
+                   help="end time [s] (default 20 x0/V)")
+    _add_accuracy(b)
+    add_debug_flag(b)
     return p
+
+
+def _add_material(p):
+    si = p.add_argument_group("material")
+    si.add_argument("--E-star", type=float, help="plane-strain modulus E* [Pa]")
+    si.add_argument("--E", type=float, help="Young's modulus [Pa] (with --poisson)")
+    si.add_argument("--poisson", type=float, help="Poisson's ratio in (-1, 0.5] (with --E)")
+    si.add_argument("--viscosity", type=float, help="film viscosity [Pa s]")
+    si.add_argument("--radius", type=float, help="sphere radius [m]")
+
+
+def _add_accuracy(p):
+    p.add_argument("--rtol", type=positive_float, default=None,
+                   help="accuracy: local error tolerance (Settings.rtol, default 3e-4)")
+    p.add_argument("--max-steps", type=int, default=None,
+                   help="attempted-step budget (Settings.max_steps)")
+    p.add_argument("--out", help="write results as JSON here")
+    p.add_argument("--plot", help="write a figure here (.png, .pdf, .svg, ...)")
+
+
+def _modulus(args) -> float:
+    from ._units import plane_strain_modulus
+
+    if args.E_star is not None and (args.E is not None or args.poisson is not None):
+        raise UsageError("give either --E-star or --E with --poisson, not both")
+    if args.E_star is None and (args.E is None or args.poisson is None):
+        raise UsageError("give --E-star (or --E with --poisson)")
+    return args.E_star if args.E_star is not None else plane_strain_modulus(args.E, args.poisson)
+
+
+def _require(args, names):
+    missing = [n for n in names if getattr(args, n.replace("-", "_")) is None]
+    if missing:
+        raise UsageError("this command needs --" + ", --".join(missing))
+
+
+def _check_thin(name, value, radius):
+    if value > MAX_TRAVEL_OVER_RADIUS * radius:
+        raise UsageError(
+            f"{name} {value:g} m is {value / radius:.3g} radii (--radius {radius:g} m); the "
+            f"thin-film model needs it ≪ R (at most {MAX_TRAVEL_OVER_RADIUS:g} R). Are the "
+            "lengths in metres?"
+        )
+
+
+def _settings(args):
+    from ._solve import Settings
+
+    given = [("rtol", args.rtol), ("max_steps", args.max_steps)]
+    return Settings(**{k: v for k, v in given if v is not None})
+
+
+def read_load_csv(path):
+    """(time_s, force_N) from a CSV with a header line naming time_s and force_N; a malformed
+    value names its line and column."""
+    from ._files import UsageError as _UE
+
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            lines = f.read().splitlines()
+    except (OSError, UnicodeDecodeError) as e:
+        raise _UE(f"--load-csv {path}: cannot read it ({e})") from None
+    rows = [(i + 1, ln) for i, ln in enumerate(lines) if ln.strip() and not ln.startswith("#")]
+    if not rows:
+        raise _UE(f"{path}: no data")
+    header = [h.strip() for h in rows[0][1].split(",")]
+    if "time_s" not in header or "force_N" not in header:
+        raise _UE(f"{path}:{rows[0][0]}: the header must name time_s and force_N, got {header}")
+    it, jf = header.index("time_s"), header.index("force_N")
+    t, f = [], []
+    for lineno, ln in rows[1:]:
+        cells = ln.split(",")
+        if len(cells) != len(header):
+            raise _UE(f"{path}:{lineno}: {len(cells)} columns, the header has {len(header)}")
+        for col, out in ((it, t), (jf, f)):
+            try:
+                v = float(cells[col])
+            except ValueError:
+                raise _UE(
+                    f"{path}:{lineno}: column {col + 1} ({header[col]}) is not a number: "
+                    f"{cells[col].strip()!r}"
+                ) from None
+            if not math.isfinite(v):
+                raise _UE(f"{path}:{lineno}: column {col + 1} ({header[col]}) is {v}")
+            out.append(v)
+    t, f = np.asarray(t), np.asarray(f)
+    if t.size < 2 or np.any(np.diff(t) <= 0):
+        raise _UE(f"{path}: time_s must increase strictly over at least two rows")
+    if f.max() <= 0 or f.min() < 0:
+        raise _UE(f"{path}: force_N must be >= 0 with a positive peak (a compressive load)")
+    return t, f
+
+
+def _drive_json(res, scales, z0_m):
+    d = scales["gap_m"]
+    return {
+        "beta": res.beta,
+        "z0": res.z0,
+        "t": res.t.tolist(),
+        "gap": res.gap.tolist(),
+        "force": res.force.tolist(),
+        "h_min": res.film_min.tolist(),
+        "h_center": res.film_center.tolist(),
+        "t_s": (res.t * scales["time_s"]).tolist(),
+        "gap_m": (res.gap * d).tolist(),
+        "approach_m": (z0_m - res.gap * d).tolist(),
+        "force_N": (res.force * scales["force_N"]).tolist(),
+        "h_min_m": (res.film_min * d).tolist(),
+        "h_center_m": (res.film_center * d).tolist(),
+        "gap_error_m": (res.gap_error * d).tolist(),
+        "force_error_N": (res.force_error * scales["force_N"]).tolist(),
+        "steps": res.accepted,
+        "rejected_steps": res.rejected,
+        "run_s": res.run_s,
+        "compile_s": res.compile_s,
+        "ok": res.ok,
+        "scales": scales,
+    }
+
+
+def _creep(args) -> int:
+    from ._indenter import SampledTravel
+    from ._solve import check_parameters, relax
+    from ._units import CreepTest
+
+    e_star = _modulus(args)
+    _require(args, ["viscosity", "radius", "gap"])
+    outputs = [("--out", args.out), ("--plot", args.plot)]
+    check_outputs(outputs, inputs=[args.load_csv] if args.load_csv else ())
+    history = None
+    if args.load_csv:
+        if args.load is not None or args.ramp_time is not None:
+            raise UsageError("give either --load-csv or --load with --ramp-time, not both")
+        ts, fs = read_load_csv(args.load_csv)
+        peak = int(np.argmax(fs))
+        load, ramp = float(fs[peak]), float(ts[peak] - ts[0])
+        if ramp <= 0:
+            raise UsageError(f"{args.load_csv}: the load must rise from its first row")
+        test = CreepTest(e_star, args.radius, args.viscosity, load, ramp, args.gap)
+        history = SampledTravel((ts - ts[0]) / ramp, fs / load)
+        t_end = (ts[-1] - ts[0]) / ramp
+    else:
+        _require(args, ["load", "ramp-time", "hold"])
+        if not (math.isfinite(args.hold) and args.hold >= 0):
+            raise UsageError(f"--hold must be >= 0 s, got {args.hold}")
+        test = CreepTest(e_star, args.radius, args.viscosity, args.load, args.ramp_time, args.gap)
+        t_end = (args.ramp_time + args.hold) / args.ramp_time
+    _check_thin("--gap", test.gap, test.radius)
+    _check_thin("the Hertz indentation under the load", test.indent, test.radius)
+    check_parameters(test.beta, test.z0_bar)
+    settings = _settings(args)
+    prepare_outputs(outputs)
+    profile_times = sorted({min(1.0, t_end), t_end})
+    res = relax(test.beta, test.z0_bar, t_end, drive=test.drive(history), settings=settings,
+                profile_times=profile_times)
+    out = _drive_json(res, test.scales, test.gap)
+    out.update(load_N=test.load, hertz_indentation_m=test.indent,
+               settings=dataclasses.asdict(settings))
+    d = test.indent
+    print(
+        f"creep: beta={test.beta:.4g} z0={test.z0_bar:.4g} (d_c = Hertz indentation "
+        f"{d:.4g} m, t_c = {test.time_scale:.4g} s): approach at the end "
+        f"{test.gap - res.gap[-1] * d:.5g} m (Hertz: {test.gap + d:.5g} m), "
+        f"film h(0) {res.film_center[-1] * d:.3g} m; {res.accepted} steps, run {res.run_s:.3f} s,"
+        f" compile {res.compile_s:.2f} s"
+    )
+    _write(args, out, res, "creep", test)
+    return 0
+
+
+def _bounce(args) -> int:
+    from ._drives import restitution
+    from ._solve import check_parameters, relax
+    from ._units import Collision
+
+    e_star = _modulus(args)
+    _require(args, ["viscosity", "radius", "speed", "gap"])
+    if (args.mass is None) == (args.density is None):
+        raise UsageError("give either --mass or --density")
+    if not (math.isfinite(args.weight) and args.weight >= 0):
+        raise UsageError(f"--weight must be >= 0 N, got {args.weight}")
+    outputs = [("--out", args.out), ("--plot", args.plot)]
+    check_outputs(outputs)
+    mass = args.mass if args.mass else args.density * 4 / 3 * math.pi * args.radius**3
+    test = Collision(e_star, args.radius, args.viscosity, mass, args.speed, args.gap, args.weight)
+    _check_thin("--gap", test.gap, test.radius)
+    check_parameters(test.beta, 1.0)
+    t_end = 20.0 if args.t_end is None else args.t_end / test.time_scale
+    settings = _settings(args)
+    prepare_outputs(outputs)
+    res = relax(test.beta, 1.0, t_end, drive=test.drive(), settings=settings,
+                profile_times=[t_end])
+    e = restitution(res)
+    out = _drive_json(res, test.scales, test.gap)
+    v = test.speed
+    out.update(
+        velocity=res.velocity.tolist(),
+        velocity_m_s=(res.velocity * v).tolist(),
+        restitution=None if math.isnan(e) else e,
+        restitution_read_at="the starting gap x0, moving away",
+        stokes=test.stokes,
+        elasticity_davis=test.elasticity,
+        mass_kg=mass,
+        settings=dataclasses.asdict(settings),
+    )
+    print(
+        f"bounce: St={test.stokes:.4g}, beta={test.beta:.4g} (Davis et al.'s epsilon "
+        f"{test.elasticity:.3g}): closest gap {res.gap.min() * test.gap:.4g} m, film "
+        f"{res.film_min.min() * test.gap:.3g} m; restitution "
+        + ("none (no rebound to x0)" if math.isnan(e) else f"{e:.4f}")
+        + f"; {res.accepted} steps, run {res.run_s:.3f} s, compile {res.compile_s:.2f} s"
+    )
+    _write(args, out, res, "bounce", test)
+    return 0
+
+
+def _write(args, out, res, kind, test):
+    if args.out:
+        with atomic_open(args.out, "w") as f:
+            json.dump(out, f)
+        print(f"wrote {args.out}")
+    if args.plot:
+        from ._plotting import plot_drive
+
+        plot_drive(res, args.plot, kind, test)
+        print(f"wrote {args.plot}")
+
+
+def _dispatch(args) -> int:
+    return {"relax": _relax, "creep": _creep, "bounce": _bounce}[args.command](args)
 
 
 def _si_test(args):
@@ -178,7 +448,7 @@ def _relax(args) -> int:
 
 def main(argv=None) -> int:
     """Run ``lubjax`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit status."""
-    return run_cli(PROG, _parser(), _relax, argv)
+    return run_cli(PROG, _parser(), _dispatch, argv)
 
 
 if __name__ == "__main__":

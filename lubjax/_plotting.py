@@ -63,3 +63,53 @@ def plot_result(res, path: str, test=None) -> None:
         save_figure(fig, path, dpi=110)
     finally:
         plt.close(fig)
+
+
+def plot_drive(res, path: str, kind: str, test) -> None:
+    """A creep or bounce run in SI units: the sphere's position, the force (and velocity), the
+    film, and the last profiles."""
+    sc = test.scales
+    d, ts, fs = sc["gap_m"], sc["time_s"], sc["force_N"]
+    t = res.t * ts
+    fig, ax = plt.subplots(1, 4, figsize=(18, 4))
+    if kind == "creep":
+        ax[0].plot(t, (test.gap - res.gap * d) * 1e6, "k-", label="approach z0 - z")
+        ax[0].axhline((test.gap + test.indent) * 1e6, color="r", ls="--",
+                      label="Hertz: z0 + δ∞")
+        ax[0].set_ylabel("approach [μm]")
+        ax[1].plot(t, res.force * fs * 1e3, "k-", label="load")
+        ax[1].set_ylabel("force [mN]")
+        title = (f"creep: F = {test.load:.3g} N, E* = {test.E_star:.3g} Pa, "
+                 f"η = {test.viscosity:.3g} Pa s, R = {test.radius:.3g} m, z0 = {test.gap:.3g} m"
+                 f"  (β = {test.beta:.3g}, z̄0 = {test.z0_bar:.3g})")
+    else:
+        ax[0].plot(t, res.gap * d * 1e6, "k-", label="gap z")
+        ax[0].axhline(0, color="0.6", lw=0.5)
+        ax[0].set_ylabel("sphere position z [μm]")
+        ax[1].plot(t, res.velocity * test.speed, "b-", label="velocity dz/dt [m/s]")
+        ax[1].set_ylabel("velocity [m/s]", color="b")
+        twin = ax[1].twinx()
+        twin.plot(t, res.force * fs * 1e3, "k-", lw=0.8)
+        twin.set_ylabel("film force [mN] (black)")
+        title = (f"bounce: St = {test.stokes:.3g}, β = {test.beta:.3g}, m = {test.mass:.3g} kg,"
+                 f" V = {test.speed:.3g} m/s, x0 = {test.gap:.3g} m")
+    for a in ax[:3]:
+        a.set_xlabel("t [s]")
+    ax[0].legend(fontsize=8)
+    ax[2].semilogy(t, np.clip(res.film_min * d, 1e-15, None), "k-", label="min h")
+    ax[2].semilogy(t, np.clip(res.film_center * d, 1e-15, None), "g--", label="h(0)")
+    ax[2].set_ylabel("film thickness [m]")
+    ax[2].legend(fontsize=8)
+    r = res.r * sc["length_m"] * 1e3
+    sel = res.r <= 3.0
+    for tp, p in zip(res.profile_times, res.pressure):
+        ax[3].plot(r[sel], p[sel] * sc["pressure_Pa"] / 1e3, label=f"t = {tp * ts:.3g} s")
+    ax[3].set_xlabel("r [mm]")
+    ax[3].set_ylabel("pressure [kPa]")
+    ax[3].legend(fontsize=8)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    try:
+        save_figure(fig, path, dpi=110)
+    finally:
+        plt.close(fig)

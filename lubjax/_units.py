@@ -23,6 +23,12 @@ def _check_poisson(name: str, value) -> float:
     return v
 
 
+def _check_fields(obj, fields) -> None:
+    """Validate and store each (name, unit) field of a frozen dataclass as a positive float."""
+    for name, unit in fields:
+        object.__setattr__(obj, name, _check_positive(name, getattr(obj, name), unit))
+
+
 def plane_strain_modulus(E: float, poisson_ratio: float) -> float:
     """E* = E/(1 - ν²)."""
     E = _check_positive("E", E, "Pa")
@@ -73,15 +79,17 @@ class RelaxationTest:
     gap: float
 
     def __post_init__(self):
-        for name, unit in [
-            ("E_star", "Pa"),
-            ("radius", "m"),
-            ("viscosity", "Pa s"),
-            ("speed", "m/s"),
-            ("indent", "m"),
-            ("gap", "m"),
-        ]:
-            object.__setattr__(self, name, _check_positive(name, getattr(self, name), unit))
+        _check_fields(
+            self,
+            [
+                ("E_star", "Pa"),
+                ("radius", "m"),
+                ("viscosity", "Pa s"),
+                ("speed", "m/s"),
+                ("indent", "m"),
+                ("gap", "m"),
+            ],
+        )
 
     @classmethod
     def from_E(cls, E: float, poisson_ratio: float, **kw) -> RelaxationTest:
@@ -120,3 +128,168 @@ class RelaxationTest:
     def force_scale(self) -> float:
         """F = (2 E* d_c^{3/2} √R / π) F̄ [N], eq 11b."""
         return 2 * self.E_star * self.indent**1.5 * math.sqrt(self.radius) / math.pi
+
+
+def _scales_of(E_star: float, radius: float, d_c: float, t_c: float) -> dict:
+    return {
+        "time_s": t_c,
+        "length_m": math.sqrt(radius * d_c),
+        "gap_m": d_c,
+        "pressure_Pa": 2 * E_star / math.pi * math.sqrt(d_c / radius),
+        "force_N": 2 * E_star * d_c**1.5 * math.sqrt(radius) / math.pi,
+    }
+
+
+def hertz_indentation(E_star: float, radius: float, load: float) -> float:
+    """δ = (3F/(4E*√R))^{2/3} [m], Hertz's indentation under the load F."""
+    return (3 * load / (4 * E_star * math.sqrt(radius))) ** (2 / 3)
+
+
+@dataclasses.dataclass(frozen=True)
+class CreepTest:
+    """A creep test in SI units: a load ramped from 0 to ``load`` in ``ramp_time``, then held,
+    on a sphere that starts at rest at the gap ``gap``.
+
+    Scales (MODEL.md, "Drives"): d_c = δ∞, Hertz's indentation under the load, and
+    t_c = ``ramp_time``, so that the dimensionless load plateau is F̄ = 2π/3 and the gap tends to
+    z̄ = -1 (the approach z0 + δ∞). β = E* d_c^{3/2} t_c/(6π η R^{3/2}) keeps the meaning of eq 8e
+    with the speed d_c/t_c.
+    """
+
+    E_star: float
+    radius: float
+    viscosity: float
+    load: float
+    ramp_time: float
+    gap: float
+
+    def __post_init__(self):
+        _check_fields(
+            self,
+            [
+                ("E_star", "Pa"),
+                ("radius", "m"),
+                ("viscosity", "Pa s"),
+                ("load", "N"),
+                ("ramp_time", "s"),
+                ("gap", "m"),
+            ],
+        )
+
+    @property
+    def indent(self) -> float:
+        """d_c = δ∞ [m]."""
+        return hertz_indentation(self.E_star, self.radius, self.load)
+
+    @property
+    def time_scale(self) -> float:
+        return self.ramp_time
+
+    @property
+    def beta(self) -> float:
+        d = self.indent
+        return (
+            self.E_star
+            * d**1.5
+            * self.ramp_time
+            / (6 * math.pi * self.viscosity * self.radius**1.5)
+        )
+
+    @property
+    def z0_bar(self) -> float:
+        return self.gap / self.indent
+
+    @property
+    def load_bar(self) -> float:
+        """F̄ of the plateau (2π/3 by the choice of d_c)."""
+        return self.load / self.force_scale
+
+    @property
+    def force_scale(self) -> float:
+        return self.scales["force_N"]
+
+    @property
+    def scales(self) -> dict:
+        return _scales_of(self.E_star, self.radius, self.indent, self.time_scale)
+
+    def drive(self, history=None):
+        """The :class:`lubjax.Load` drive: the ramp-and-hold, or ``history`` (a sampled load
+        shape, in units of ``load`` against t/t_c)."""
+        from ._drives import Load
+        from ._indenter import RampHold
+
+        return Load(self.load_bar, RampHold() if history is None else history)
+
+
+@dataclasses.dataclass(frozen=True)
+class Collision:
+    """A free sphere approaching a wall through the film (Davis, Serayssol & Hinch 1986):
+    mass ``mass``, speed ``speed`` toward the wall at the gap ``gap``, optionally pushed by a
+    constant ``weight`` (its weight less buoyancy, N).
+
+    Scales: d_c = ``gap`` (x0) and t_c = x0/V, so the sphere starts at z̄ = 1 with v̄ = -1.
+    Numbers: β = E* x0^{5/2}/(6π η V R^{3/2}); Stokes St = m V/(6π η R²); the inverse mass of
+    :class:`lubjax.FreeSphere`, G = 2β/(π St); W̄ = W/F_s. Davis et al.'s elasticity parameter
+    ε = 4θηVR^{3/2}/x0^{5/2} with θ = 1/(πE*) (their eq 2.6 as we read it) is 2/(3π²β).
+    """
+
+    E_star: float
+    radius: float
+    viscosity: float
+    mass: float
+    speed: float
+    gap: float
+    weight: float = 0.0
+
+    def __post_init__(self):
+        _check_fields(
+            self,
+            [
+                ("E_star", "Pa"),
+                ("radius", "m"),
+                ("viscosity", "Pa s"),
+                ("mass", "kg"),
+                ("speed", "m/s"),
+                ("gap", "m"),
+            ],
+        )
+        w = float(self.weight)
+        if not (math.isfinite(w) and w >= 0):
+            raise ValueError(f"weight must be finite and >= 0 (N), got {self.weight!r}")
+        object.__setattr__(self, "weight", w)
+
+    @property
+    def time_scale(self) -> float:
+        return self.gap / self.speed
+
+    @property
+    def beta(self) -> float:
+        return (
+            self.E_star
+            * self.gap**2.5
+            / (6 * math.pi * self.viscosity * self.speed * self.radius**1.5)
+        )
+
+    @property
+    def stokes(self) -> float:
+        return self.mass * self.speed / (6 * math.pi * self.viscosity * self.radius**2)
+
+    @property
+    def elasticity(self) -> float:
+        """Davis et al.'s ε = 2/(3π²β)."""
+        return 2 / (3 * math.pi**2 * self.beta)
+
+    @property
+    def force_scale(self) -> float:
+        return self.scales["force_N"]
+
+    @property
+    def scales(self) -> dict:
+        return _scales_of(self.E_star, self.radius, self.gap, self.time_scale)
+
+    def drive(self):
+        from ._drives import FreeSphere
+
+        return FreeSphere(
+            2 * self.beta / (math.pi * self.stokes), -1.0, self.weight / self.force_scale
+        )
