@@ -24,6 +24,7 @@ class SweepResult(NamedTuple):
     t: np.ndarray  # (T,) output times (shared)
     force: np.ndarray  # (B, T), by each run's own interpolant
     film_min: np.ndarray  # (B, T)
+    gap: np.ndarray  # (B, T) the sphere's position z̄ (free under a load, spring or free drive)
     ok: np.ndarray  # (B,) finished, finite and positive film throughout
     steps: np.ndarray  # (B,) accepted steps of each run
     compile_s: float
@@ -39,6 +40,7 @@ def _one(tol, disc, history, t_end, times, b, z):
     return (
         evaluate(traj.steps, times, "force"),
         evaluate(traj.steps, times, "film_min"),
+        evaluate(traj.steps, times, "gap"),
         ok,
         traj.accepted,
     )
@@ -78,6 +80,7 @@ def sweep(
     t_end: float = 5.0,
     *,
     history: RampHold | SampledTravel | None = None,
+    drive=None,
     settings: Settings | None = None,
     devices: int | None = None,
     times=None,
@@ -86,7 +89,8 @@ def sweep(
 
     All runs share one mesh; each takes its own error-controlled steps (``vmap`` of a
     ``while_loop``: the batch runs until its slowest member is done) and reports F̄ and min h̄
-    at the shared output ``times`` (default 501 equally spaced) by its own interpolant. The
+    at the shared output ``times`` (default 501 equally spaced) by its own interpolant; any
+    ``drive`` (shared by the batch) instead of the travel ``history``. The
     batch is padded to a multiple of the device count and split across ``devices`` (default:
     all of ``jax.devices()``). Failed runs are flagged in ``ok`` rather than raised, so one bad
     corner does not discard a map.
@@ -108,7 +112,7 @@ def sweep(
     n_dev = len(jax.devices()) if devices is None else int(devices)
     if not 1 <= n_dev <= len(jax.devices()):
         raise ValueError(f"devices must be in [1, {len(jax.devices())}], got {devices}")
-    plan = make_plan(t_end, history=history, settings=settings, times=times)
+    plan = make_plan(t_end, history=history, drive=drive, settings=settings, times=times)
     pad = (-b.size) % n_dev
     bp = np.concatenate([b, np.full(pad, b[-1])])
     zp = np.concatenate([z, np.full(pad, z[-1])])
@@ -137,8 +141,8 @@ def sweep(
                 jax.block_until_ready(outs[-1])
         outs = jax.block_until_ready(outs)
     run_s = time.perf_counter() - start
-    force, film_min, ok, steps = (
-        np.concatenate([np.asarray(o[i]) for o in outs])[: b.size] for i in range(4)
+    force, film_min, gap, ok, steps = (
+        np.concatenate([np.asarray(o[i]) for o in outs])[: b.size] for i in range(5)
     )
     ok = ok & np.all(np.isfinite(force), axis=1)
-    return SweepResult(b, z, plan.t, force, film_min, ok, steps, compile_s, run_s, n_dev)
+    return SweepResult(b, z, plan.t, force, film_min, gap, ok, steps, compile_s, run_s, n_dev)

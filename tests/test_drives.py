@@ -173,3 +173,15 @@ def test_bad_drive_input_is_refused():
         lubjax.Load(1.0, history=3.0)
     with pytest.raises(ValueError, match="either history"):
         lubjax.relax(10, 0.5, history=lubjax.RampHold(), drive=lubjax.Load())
+
+
+def test_sweep_takes_a_drive_and_matches_single_runs():
+    """The batch (vmap of the while_loop, each member its own steps) under force control gives
+    each member's own run."""
+    betas, z0s = np.array([10.0, 300.0]), np.array([0.5, 2.0])
+    times = np.linspace(0.0, 3.0, 31)
+    res = lubjax.sweep(betas, z0s, 3.0, drive=lubjax.Load(), settings=FAST, times=times)
+    assert res.ok.all()
+    for k in range(2):
+        one = lubjax.relax(betas[k], z0s[k], 3.0, drive=lubjax.Load(), settings=FAST)
+        np.testing.assert_allclose(res.gap[k], one.at(times, "gap"), rtol=1e-9, atol=1e-12)
