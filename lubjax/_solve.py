@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._drives import as_drive
+from ._drives import Load, Travel, as_drive
 from ._indenter import RampHold, SampledTravel
 from ._mesh import Mesh, graded_mesh
 from ._stepper import (
@@ -55,6 +55,24 @@ def _mesh_from_tolerance(rtol: float) -> tuple[float, float, float]:
     return dr, growth, length
 
 
+#: The mesh spacing at a refined contact edge is dr / RIM_REFINEMENT.
+RIM_REFINEMENT = 7.0
+
+
+def _final_contact_radius(drive, z0) -> float | None:
+    """Edge of the Hertz contact the drive ends in (dimensionless), or None."""
+    if isinstance(drive, Travel):
+        samples = getattr(drive.history, "travel_samples", None)
+        final = drive.history.travel(np.asarray([1e300])) if samples is None else samples
+        depth = float(np.max(np.asarray(final))) - z0
+    elif isinstance(drive, Load):
+        final = float(np.asarray(drive.load(np.asarray([1e300])))[0])
+        depth = (3.0 * final / (2.0 * math.pi)) ** (2.0 / 3.0)
+    else:
+        return None
+    return math.sqrt(depth) if depth > 0 else None
+
+
 @dataclasses.dataclass(frozen=True)
 class Settings:
     """Accuracy settings. ``rtol`` is *the* accuracy knob: it sets the time-step controller's
@@ -77,6 +95,12 @@ class Settings:
             below the peak does not matter (fits of noisy data: fitting.FIT_SETTINGS uses 1e-5).
         error_estimate: also run the nested coarse mesh (every other node) at rtol and at
             8·rtol, and return ``Result.force_error`` (about +30 % run time).
+        contact_radius: refine the mesh to dr/7 around this r̄ (the Hertz contact's edge,
+            where a long hold drains through a thin neck; see :func:`lubjax.graded_mesh`).
+            "auto" (default): :func:`relax` takes the edge of the contact the drive ends in,
+            √(travel - z̄0) for a prescribed travel, √δ̄ of Hertz under a load; none for a
+            spring, a free sphere or no contact (z̄0 ≥ travel). ``make_plan``/``sweep``/fits
+            share one mesh across z̄0 and do not refine with "auto". None: never.
     """
 
     rtol: float = 3e-4
@@ -90,6 +114,7 @@ class Settings:
     max_steps: int = 20_000
     force_floor: float = 1e-8
     error_estimate: bool = True
+    contact_radius: float | str | None = "auto"
 
     def __post_init__(self):
         for name in ("rtol", "atol", "r_fine", "initial_step", "force_floor"):
@@ -108,6 +133,14 @@ class Settings:
             value = getattr(self, name)
             if value is not None and not (isinstance(value, numbers.Real) and value > 0):
                 raise ValueError(f"Settings.{name} must be > 0 or None, got {value!r}")
+        c = self.contact_radius
+        if not (c is None or c == "auto" or (
+            isinstance(c, numbers.Real) and not isinstance(c, bool) and 0 < c < self.r_fine
+        )):
+            raise ValueError(
+                f"Settings.contact_radius must be 'auto', None or in (0, r_fine = "
+                f"{self.r_fine:g}), got {c!r}"
+            )
 
     def mesh_parameters(self) -> tuple[float, float, float]:
         dr, growth, length = _mesh_from_tolerance(self.rtol)
@@ -117,9 +150,16 @@ class Settings:
             self.length if self.length is not None else length,
         )
 
-    def mesh(self) -> Mesh:
+    def mesh(self, contact_radius: float | None = None) -> Mesh:
+        """The mesh; refined around ``contact_radius`` if given, else around a numeric
+        ``Settings.contact_radius``."""
         dr, growth, length = self.mesh_parameters()
-        return graded_mesh(dr, self.r_fine, length, growth)
+        rim = contact_radius
+        if rim is None and not isinstance(self.contact_radius, str):
+            rim = self.contact_radius
+        if rim is None:
+            return graded_mesh(dr, self.r_fine, length, growth)
+        return graded_mesh(dr, self.r_fine, length, growth, rim=rim, rim_dr=dr / RIM_REFINEMENT)
 
     def tolerance(self) -> Tolerance:
         return Tolerance(
@@ -372,7 +412,12 @@ def relax(
     t_start = float(history.t_start)
     t_end = _check_t_end(t_end, t_start)
     ptimes = _check_times(profile_times, "profile_times", t_start, t_end)
-    mesh = settings.mesh()
+    rim = None
+    if settings.contact_radius == "auto":
+        rim = _final_contact_radius(history, float(z0))
+        # (outside the fine zone there is nothing to refine: the zone must be widened instead)
+        rim = rim if rim is not None and rim < 0.95 * settings.r_fine else None
+    mesh = settings.mesh(rim)
     disc = discretise(mesh)
     tol = settings.tolerance()
     runs = [(disc, tol, ptimes)]
