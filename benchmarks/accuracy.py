@@ -39,9 +39,10 @@ Z0S = (0.5, 0.9, 1.0, 1.11, 2.0)
 T_END = 1e3
 T_OUT = np.unique(np.concatenate([np.linspace(0.01, 5.0, 500), np.geomspace(5.0, T_END, 200)]))
 REFERENCE = lubjax.Settings(rtol=1e-7, atol=1e-16, dr=0.005, mesh_growth=1.02, length=2000.0,
-                            max_steps=400_000, error_estimate=False)
+                            max_steps=400_000, error_estimate=False, contact_radius="auto")
 REFERENCE_CHECK = lubjax.Settings(rtol=3e-7, atol=1e-16, dr=0.0075, mesh_growth=1.03,
-                                  length=1000.0, max_steps=400_000, error_estimate=False)
+                                  length=1000.0, max_steps=400_000, error_estimate=False,
+                                  contact_radius="auto")
 CACHE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out", "cache")
 FIELDS = ("force", "film_center", "film_min")
 
@@ -104,6 +105,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="β ∈ {10, 1000}, z̄0 ∈ {0.5, 1.11}")
     ap.add_argument("--rtol", type=float, default=None, help="tolerance of the runs checked")
+    ap.add_argument("--contact-radius", default=None, choices=("auto",),
+                    help="refine the checked runs at the contact edge (Settings.contact_radius)")
     ap.add_argument("--out", default="benchmarks/out/accuracy.md")
     ap.add_argument("--betas", type=float, nargs="*", default=None)
     ap.add_argument("--z0s", type=float, nargs="*", default=None)
@@ -113,7 +116,9 @@ def main(argv=None):
     betas, z0s = ((10.0, 1000.0), (0.5, 1.11)) if args.quick else (BETAS, Z0S)
     betas = args.betas or betas
     z0s = args.z0s or z0s
-    settings = lubjax.Settings() if args.rtol is None else lubjax.Settings(rtol=args.rtol)
+    settings = lubjax.Settings(contact_radius=args.contact_radius)
+    if args.rtol is not None:
+        settings = lubjax.Settings(rtol=args.rtol, contact_radius=args.contact_radius)
     rows = []
     for beta in betas:
         for z0 in z0s:
@@ -144,7 +149,8 @@ def main(argv=None):
         w.writeheader()
         w.writerows(rows)
     lines = [
-        f"Defaults (Settings(rtol={settings.rtol:g})) against converged runs, t̄ ∈ [0, 10³]; "
+        f"Settings(rtol={settings.rtol:g}, contact_radius={settings.contact_radius!r}) "
+        f"against converged runs, t̄ ∈ [0, 10³]; "
         f"{time.strftime('%Y-%m-%d')}, {label()}.",
         "",
         "| " + " | ".join(keys) + " |",

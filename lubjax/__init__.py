@@ -46,6 +46,7 @@ from ._stepper import (  # noqa: E402
     film_thickness,
     rollout,
 )
+from ._substrate import HalfSpace, Layer, Viscoelastic  # noqa: E402
 from ._sweep import SweepResult, sweep  # noqa: E402
 from ._units import (  # noqa: E402
     Collision,
@@ -64,6 +65,8 @@ __all__ = [
     "Z0_RANGE",
     "Discretisation",
     "FreeSphere",
+    "HalfSpace",
+    "Layer",
     "Load",
     "Mesh",
     "Plan",
@@ -80,6 +83,7 @@ __all__ = [
     "Tolerance",
     "Trajectory",
     "Travel",
+    "Viscoelastic",
     "as_drive",
     "check_parameters",
     "contact_modulus",

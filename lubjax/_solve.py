@@ -23,11 +23,10 @@ from ._stepper import (
     Step,
     Tolerance,
     discretise,
-    displacement,
     evaluate,
-    film_thickness,
     rollout,
 )
+from ._substrate import HalfSpace, as_substrate
 from ._threads import single_threaded_blas
 
 
@@ -97,10 +96,13 @@ class Settings:
             8·rtol, and return ``Result.force_error`` (about +30 % run time).
         contact_radius: refine the mesh to dr/7 around this r̄ (the Hertz contact's edge,
             where a long hold drains through a thin neck; see :func:`lubjax.graded_mesh`).
-            "auto" (default): :func:`relax` takes the edge of the contact the drive ends in,
-            √(travel - z̄0) for a prescribed travel, √δ̄ of Hertz under a load; none for a
-            spring, a free sphere or no contact (z̄0 ≥ travel). ``make_plan``/``sweep``/fits
-            share one mesh across z̄0 and do not refine with "auto". None: never.
+            None (default): no refinement. "auto": :func:`relax` takes the edge of the contact
+            the drive ends in, √(travel - z̄0) for a prescribed travel, √δ̄ of Hertz under a
+            load; none for a spring, a free sphere or no contact (z̄0 ≥ travel);
+            ``make_plan``/``sweep``/fits share one mesh across z̄0 and ignore "auto". Use it
+            for late holds with z̄0 < 1 (h̄_min at t̄ = 100, β = 10³: 14 % → 0.4 %). Not the
+            default: at β = 10⁶, z̄0 = 0.05 held to 10⁶ the refined neck made the controller
+            take > 20000 attempts (3500 without), and relax and sweep would differ.
     """
 
     rtol: float = 3e-4
@@ -114,7 +116,7 @@ class Settings:
     max_steps: int = 20_000
     force_floor: float = 1e-8
     error_estimate: bool = True
-    contact_radius: float | str | None = "auto"
+    contact_radius: float | str | None = None
 
     def __post_init__(self):
         for name in ("rtol", "atol", "r_fine", "initial_step", "force_floor"):
@@ -176,6 +178,7 @@ class Plan(NamedTuple):
     t_end: float
     t: np.ndarray  # output times of force_curve
     mesh: Mesh
+    substrate: object = HalfSpace()  # lubjax.HalfSpace, Layer, Viscoelastic
 
 
 def _check_t_end(t_end, t_start) -> float:
@@ -218,12 +221,14 @@ def make_plan(
     *,
     history: RampHold | SampledTravel | None = None,
     drive=None,
+    substrate=None,
     settings: Settings | None = None,
     times=None,
 ) -> Plan:
     """Mesh and influence matrix (cached per mesh), tolerance, drive and output times.
 
     ``history``: a prescribed travel (default ``RampHold()``); or ``drive``: any drive.
+    ``substrate``: ``HalfSpace()`` (default), ``Layer``, ``Viscoelastic``.
     ``times``: where :func:`force_curve` reports F̄ (default 501 equally spaced times).
     """
     history = _drive_of(history, drive)
@@ -234,7 +239,10 @@ def make_plan(
         times = np.linspace(t_start, t_end, 501)
     times = _check_times(times, "times", t_start, t_end)
     mesh = settings.mesh()
-    return Plan(discretise(mesh), settings.tolerance(), history, t_end, times, mesh)
+    substrate = as_substrate(substrate)
+    return Plan(
+        discretise(mesh, substrate), settings.tolerance(), history, t_end, times, mesh, substrate
+    )
 
 
 def force_curve(plan: Plan, beta, z0, times=None, *, mode: str = "reverse"):
@@ -248,7 +256,9 @@ def force_curve(plan: Plan, beta, z0, times=None, *, mode: str = "reverse"):
     Times the run did not reach (budget exhausted) come back as NaN.
     """
     times = plan.t if times is None else times
-    traj = rollout(plan.disc, beta, z0, plan.drive, plan.t_end, plan.tol, mode=mode)
+    traj = rollout(
+        plan.disc, beta, z0, plan.drive, plan.t_end, plan.tol, substrate=plan.substrate, mode=mode
+    )
     return evaluate(traj.steps, times, "force")
 
 
@@ -357,20 +367,22 @@ _SERIES = ("t", "force", "film_min", "film_center", "outflow", "gap", "velocity"
            "elastic_energy", "dissipation")
 
 
-def _compiled_rollout(disc, history, tol: Tolerance, n_profiles: int):
-    """AOT-compile once per (mesh size, history structure, tolerance, profile count): lets us
-    report compile time apart."""
-    leaves, treedef = jax.tree_util.tree_flatten(history)
+def _compiled_rollout(disc, history, substrate, tol: Tolerance, n_profiles: int):
+    """AOT-compile once per (mesh size, drive and substrate structure, tolerance, profile
+    count): lets us report compile time apart."""
+    leaves, treedef = jax.tree_util.tree_flatten((history, substrate))
     key = (disc.r.shape[0], treedef, tuple(np.shape(x) for x in leaves), tol, n_profiles)
     if key in _COMPILED:
         return _COMPILED[key], 0.0
 
-    def run(d, b, z, h, te, pt):
-        return rollout(d, b, z, h, te, tol, pt, mode="forward")
+    def run(d, b, z, h, s, te, pt):
+        return rollout(d, b, z, h, te, tol, pt, substrate=s, mode="forward")
 
     start = time.perf_counter()
     compiled = (
-        jax.jit(run).lower(disc, 1.0, 1.0, history, 1.0, np.zeros(n_profiles)).compile()
+        jax.jit(run)
+        .lower(disc, 1.0, 1.0, history, substrate, 1.0, np.zeros(n_profiles))
+        .compile()
     )
     _COMPILED[key] = compiled
     return compiled, time.perf_counter() - start
@@ -383,6 +395,7 @@ def relax(
     *,
     history: RampHold | SampledTravel | None = None,
     drive=None,
+    substrate=None,
     settings: Settings | None = None,
     profile_times=(),
     check: str = "raise",
@@ -397,6 +410,8 @@ def relax(
             ``SampledTravel`` (a measured history).
         drive: instead of ``history``, any drive: ``Travel(history)``, ``Load`` (force
             control, creep), ``Spring`` (a sphere on a spring), ``FreeSphere`` (inertia).
+        substrate: ``HalfSpace()`` (default), ``Layer(thickness, poisson, interface)`` (a layer
+            on a rigid base), ``Viscoelastic(...)`` (creep compliance; on either).
         settings: tolerance and mesh (defaults: see :class:`Settings`).
         profile_times: times at which p̄, w̄, h̄ profiles are returned (by the stepper's
             interpolant: the steps do not depend on them).
@@ -418,22 +433,23 @@ def relax(
         # (outside the fine zone there is nothing to refine: the zone must be widened instead)
         rim = rim if rim is not None and rim < 0.95 * settings.r_fine else None
     mesh = settings.mesh(rim)
-    disc = discretise(mesh)
+    substrate = as_substrate(substrate)
+    disc = discretise(mesh, substrate)
     tol = settings.tolerance()
     runs = [(disc, tol, ptimes)]
     if settings.error_estimate:
-        coarse = discretise(mesh.coarsened())
+        coarse = discretise(mesh.coarsened(), substrate)
         loose = dataclasses.replace(tol, rtol=min(8 * tol.rtol, 0.1))
         runs += [(coarse, tol, ptimes[:0]), (coarse, loose, ptimes[:0])]
     compiled, compile_s = [], 0.0
     for d, t, pt in runs:
-        fn, seconds = _compiled_rollout(d, history, t, pt.size)
+        fn, seconds = _compiled_rollout(d, history, substrate, t, pt.size)
         compiled.append(fn)
         compile_s += seconds
     start = time.perf_counter()
     with single_threaded_blas():
         trajs = [
-            jax.block_until_ready(fn(d, float(beta), float(z0), history, t_end, pt))
+            jax.block_until_ready(fn(d, float(beta), float(z0), history, substrate, t_end, pt))
             for fn, (d, _, pt) in zip(compiled, runs)
         ]
     run_s = time.perf_counter() - start
@@ -444,11 +460,9 @@ def relax(
     series = {k: np.asarray(getattr(steps, k))[keep] for k in _SERIES}
     p = np.asarray(traj.profiles)
     z = np.asarray(traj.profile_gaps)
-    w = np.stack([np.asarray(displacement(disc, pi)) for pi in p]) if ptimes.size else p
-    h = (
-        np.stack([np.asarray(film_thickness(disc, zi, pi)) for zi, pi in zip(z, p)])
-        if ptimes.size else p
-    )
+    h = np.asarray(traj.profile_films)
+    # w̄ = -Ŵū from h̄ = z̄ + r̄²/2 - w̄ (ū ≠ p̄ on a viscoelastic substrate)
+    w = z[:, None] + 0.5 * np.asarray(disc.r) ** 2 - h
     def estimate(field):
         """Space: |y - y_coarse|/3 (second order, nested mesh of every other node); time:
         |y_coarse - y_coarse(8 rtol)|/(8^{2/3} - 1) (global error ∝ rtol^{2/3})."""

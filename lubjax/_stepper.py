@@ -51,6 +51,7 @@ from . import _controller as ctrl
 from ._drives import as_drive
 from ._influence import force_weights, influence_matrix
 from ._mesh import Mesh
+from ._substrate import HalfSpace, as_substrate
 
 
 class Discretisation(NamedTuple):
@@ -65,15 +66,20 @@ class Discretisation(NamedTuple):
     force_weights: jax.Array  # F̄ = c·p̄, (N,)
 
 
+def discretise(mesh: Mesh, substrate=None) -> Discretisation:
+    """All per-mesh arrays for a substrate's geometry (default: the half-space); cached, so the
+    influence matrix is built once per (mesh, elastic substrate)."""
+    return _discretise(mesh, as_substrate(substrate).elastic)
+
+
 @functools.lru_cache(maxsize=32)
-def discretise(mesh: Mesh) -> Discretisation:
-    """All per-mesh arrays; cached, so the influence matrix is built once per mesh."""
+def _discretise(mesh: Mesh, elastic) -> Discretisation:
     r = mesh.r
     face = 0.5 * (r[1:] + r[:-1])
     outer = np.concatenate([face, [r[-1]]])
     inner = np.concatenate([[0.0], face])
     area = 0.5 * (outer**2 - inner**2)
-    w = influence_matrix(mesh)
+    w = influence_matrix(mesh) if isinstance(elastic, HalfSpace) else elastic.influence(mesh)
     return Discretisation(
         r=jnp.asarray(r),
         cell_area=jnp.asarray(area),
@@ -131,6 +137,10 @@ class State(NamedTuple):
     dt_prev2: jax.Array  # t_{n-1} - t_{n-2}
     pressure: jax.Array  # p̄ⁿ (N,)
     pressure_prev: jax.Array  # p̄ⁿ⁻¹ (N,)
+    elastic_load: jax.Array  # ūⁿ: w̄ = -Ŵū (= p̄ on an elastic substrate; _substrate)
+    elastic_load_prev: jax.Array
+    memory: jax.Array  # internal variables q_kⁿ of a viscoelastic substrate (K, N)
+    memory_prev: jax.Array
     film: jax.Array  # h̄ⁿ (N,)
     film_prev: jax.Array
     film_prev2: jax.Array
@@ -155,6 +165,7 @@ class State(NamedTuple):
     entry_prev: jax.Array
     profiles: jax.Array  # p̄ at the requested profile times (P, N)
     profile_gaps: jax.Array  # z̄ at the requested profile times (P,)
+    profile_films: jax.Array  # h̄ at the requested profile times (P, N)
 
 
 class Step(NamedTuple):
@@ -181,6 +192,7 @@ class Trajectory(NamedTuple):
     steps: Step  # leading axis: max_steps + 1 entries
     profiles: jax.Array  # p̄ at the requested times, (P, N)
     profile_gaps: jax.Array  # z̄ at the requested times, (P,)
+    profile_films: jax.Array  # h̄ at the requested times, (P, N)
     status: jax.Array
     accepted: jax.Array
     rejected: jax.Array
@@ -234,20 +246,25 @@ def face_mobility(disc: Discretisation, film, film_prev, gap, gap_prev, omega):
     return 6.0 / (inv_k[:-1] + 4.0 * inv_mid + inv_k[1:])
 
 
-def linear_step(disc: Discretisation, beta, k_face, dt, a0, gap_history_rate, known_pressure, row):
+def linear_step(
+    disc: Discretisation, beta, k_face, dt, a0, gap_history_rate, compliance, known_load, row
+):
     """One step: solve for (p̄ⁿ⁺¹, Δz̄), Δz̄ = z̄ⁿ⁺¹ - z̄ⁿ, from the N-1 Reynolds rows
 
-        A (a₀Δz̄ - a₂Δz̄ⁿ + Ŵ(a₀p̄ⁿ⁺¹ + a₁p̄ⁿ + a₂p̄ⁿ⁻¹))/Δt = β T(k) p̄ⁿ⁺¹
+        A (a₀Δz̄ - a₂Δz̄ⁿ + Ŵ(a₀ c p̄ⁿ⁺¹ + known_load))/Δt = β T(k) p̄ⁿ⁺¹
 
     (the BDF form of (R) in :mod:`lubjax._drives`, a₁ = -(a₀ + a₂), so a₀z̄ⁿ⁺¹ + a₁z̄ⁿ + a₂z̄ⁿ⁻¹
-    = a₀Δz̄ - a₂Δz̄ⁿ) and the drive's row α c·p̄ⁿ⁺¹ + s Δz̄ = b, ``row = (α, s, b)``.
+    = a₀Δz̄ - a₂Δz̄ⁿ, with the elastic load ūⁿ⁺¹ = c p̄ⁿ⁺¹ + ... of :mod:`lubjax._substrate`)
+    and the drive's row α c·p̄ⁿ⁺¹ + s Δz̄ = b, ``row = (α, s, b)``.
 
-    ``gap_history_rate`` = -a₂Δz̄ⁿ and ``known_pressure`` = a₁p̄ⁿ + a₂p̄ⁿ⁻¹. The r̄²/2 terms of
-    h̄ cancel exactly (Σa = 0), so the right-hand side holds only differences of the gap and the
-    elastic part: no O(1) film values cancel, and a decaying pressure (F̄ → 10⁻¹⁰⁰ in a long hold
-    at z̄0 > 1) keeps its relative accuracy and its sign. The flux operator T is tridiagonal with
-    face conductances g_{i+1/2} = β r̄ k/Δr̄: (Tp̄)_i = g_{i+1/2}(p̄_{i+1} - p̄_i) - g_{i-1/2}(p̄_i -
-    p̄_{i-1}). Unknowns p̄_0..p̄_{N-2} (p̄_{N-1} = 0, eq 22b) and Δz̄: one N×N dense solve.
+    ``gap_history_rate`` = -a₂Δz̄ⁿ; ``compliance`` = c (1 on an elastic substrate) and
+    ``known_load`` = a₀ūⁿ⁺¹ - a₀c p̄ⁿ⁺¹ + a₁ūⁿ + a₂ūⁿ⁻¹ (= a₁p̄ⁿ + a₂p̄ⁿ⁻¹ if elastic). The r̄²/2
+    terms of h̄ cancel exactly (Σa = 0), so the right-hand side holds only differences of the
+    gap and the elastic part: no O(1) film values cancel, and a decaying pressure (F̄ → 10⁻¹⁰⁰
+    in a long hold at z̄0 > 1) keeps its relative accuracy and its sign. The flux operator T is
+    tridiagonal with face conductances g_{i+1/2} = β r̄ k/Δr̄:
+    (Tp̄)_i = g_{i+1/2}(p̄_{i+1} - p̄_i) - g_{i-1/2}(p̄_i - p̄_{i-1}).
+    Unknowns p̄_0..p̄_{N-2} (p̄_{N-1} = 0, eq 22b) and Δz̄: one N×N dense solve.
     With a prescribed travel the row is (0, 1, b): partial pivoting never picks it before the
     last column, so Δz̄ = b exactly. Returns (p̄ⁿ⁺¹, Δz̄, outflow, conductances g).
     """
@@ -256,7 +273,7 @@ def linear_step(disc: Discretisation, beta, k_face, dt, a0, gap_history_rate, kn
     idx = jnp.arange(n)
     off = jnp.arange(n - 1)
     diag = g[:n] + jnp.concatenate([jnp.zeros(1, g.dtype), g[: n - 1]])
-    block = (a0 / dt) * disc.area_influence
+    block = (a0 * compliance / dt) * disc.area_influence
     block = block.at[idx, idx].add(diag)
     block = block.at[off, off + 1].add(-g[: n - 1]).at[off + 1, off].add(-g[: n - 1])
     area = disc.cell_area[:-1]
@@ -271,7 +288,7 @@ def linear_step(disc: Discretisation, beta, k_face, dt, a0, gap_history_rate, kn
         ],
         axis=0,
     )
-    rate = gap_history_rate + disc.influence @ known_pressure
+    rate = gap_history_rate + disc.influence @ known_load
     rhs = jnp.concatenate([-(area * rate[:-1] / dt), jnp.reshape(b, (1,)).astype(dtype)])
     x = jnp.linalg.solve(matrix, rhs)
     p = jnp.concatenate([x[:-1], jnp.zeros(1, x.dtype)])
@@ -312,8 +329,10 @@ def _restart_step(tol: Tolerance, beta):
     return tol.initial_step / jnp.maximum(1.0, beta)
 
 
-def _initial_state(disc, beta, drive, z0, tol: Tolerance, profile_times) -> State:
+def _initial_state(disc, beta, drive, substrate, z0, tol: Tolerance, profile_times) -> State:
     zero = jnp.zeros_like(disc.r)
+    n_memory = jnp.shape(substrate.compliance()[1])[0]
+    memory = jnp.zeros((n_memory, disc.r.shape[0]), disc.r.dtype)
     dtype = disc.r.dtype
     scalar = functools.partial(jnp.asarray, dtype=dtype)
     integer = functools.partial(jnp.asarray, dtype=jnp.int32)
@@ -326,6 +345,10 @@ def _initial_state(disc, beta, drive, z0, tol: Tolerance, profile_times) -> Stat
         dt_prev2=scalar(1.0),
         pressure=zero,
         pressure_prev=zero,
+        elastic_load=zero,
+        elastic_load_prev=zero,
+        memory=memory,
+        memory_prev=memory,
         film=h,
         film_prev=h,
         film_prev2=h,
@@ -351,11 +374,12 @@ def _initial_state(disc, beta, drive, z0, tol: Tolerance, profile_times) -> Stat
         profiles=jnp.zeros((profile_times.shape[0], disc.r.shape[0]), dtype),
         # (the initial state answers profile times at t̄_start)
         profile_gaps=jnp.full((profile_times.shape[0],), z_start, dtype),
+        profile_films=jnp.broadcast_to(h, (profile_times.shape[0], h.shape[0])),
     )
 
 
 def _entry_of(disc, state: State, outflow, dissipation, accepted, linear, stencil) -> Step:
-    elastic = state.film - state.gap - 0.5 * disc.r**2  # Ŵp̄ = -w̄
+    elastic = state.film - state.gap - 0.5 * disc.r**2  # Ŵū = -w̄
     return Step(
         t=state.t,
         force=state.force,
@@ -372,7 +396,9 @@ def _entry_of(disc, state: State, outflow, dissipation, accepted, linear, stenci
     )
 
 
-def _attempt(disc, beta, z0, drive, t_end, tol: Tolerance, profile_times, state: State, k):
+def _attempt(
+    disc, beta, z0, drive, substrate, t_end, tol: Tolerance, profile_times, state: State, k
+):
     """Attempt one step from ``state``; returns the new state and output entry ``k + 1``."""
     t = state.t
     target = _next_breakpoint(drive.breakpoints_array(), t, t_end)
@@ -391,11 +417,24 @@ def _attempt(disc, beta, z0, drive, t_end, tol: Tolerance, profile_times, state:
     row = drive.row(
         t_new, z0, dt, a0, a1, a2, state.gap, state.gap_prev, state.velocity, state.velocity_prev
     )
-    known_pressure = a1 * state.pressure + a2 * state.pressure_prev
-    p, dz, outflow, g = linear_step(disc, beta, k_face, dt, a0, -a2 * step_before,
-                                    known_pressure, row)
+    # The substrate's memory (module _substrate): ūⁿ⁺¹ = c p̄ⁿ⁺¹ + Σ_k memory_k; none if elastic.
+    j0, jk, lam = substrate.compliance()
+    denom = a0 + dt / lam
+    creep = dt * jk / lam / denom
+    compliance = j0 + jnp.sum(creep)
+    memory_known = (-a1 * state.memory - a2 * state.memory_prev) / denom[:, None]
+    known_load = (
+        a0 * jnp.sum(memory_known, axis=0)
+        + a1 * state.elastic_load
+        + a2 * state.elastic_load_prev
+    )
+    p, dz, outflow, g = linear_step(
+        disc, beta, k_face, dt, a0, -a2 * step_before, compliance, known_load, row
+    )
+    memory = memory_known + creep[:, None] * p[None, :]
+    load = j0 * p + jnp.sum(memory, axis=0)
     z_new = state.gap + dz
-    h = film_thickness(disc, z_new, p)
+    h = film_thickness(disc, z_new, load)
     force = disc.force_weights @ p
     velocity = (a0 * dz - a2 * step_before) / dt
     dissipation = 2.0 * jnp.pi * jnp.sum(g * (p[1:] - p[:-1]) ** 2)
@@ -480,6 +519,9 @@ def _attempt(disc, beta, z0, drive, t_end, tol: Tolerance, profile_times, state:
     profile_gaps = jnp.where(
         in_step, interpolant(state.gap_prev, state.gap, z_new), state.profile_gaps
     )
+    profile_films = jnp.where(
+        in_step[:, None], interpolant(state.film_prev, state.film, h), state.profile_films
+    )
 
     entry = k + 1
     new = State(
@@ -488,6 +530,10 @@ def _attempt(disc, beta, z0, drive, t_end, tol: Tolerance, profile_times, state:
         dt_prev2=dt1,
         pressure=p,
         pressure_prev=state.pressure,
+        elastic_load=load,
+        elastic_load_prev=state.elastic_load,
+        memory=memory,
+        memory_prev=state.memory,
         film=h,
         film_prev=state.film,
         film_prev2=state.film_prev,
@@ -512,6 +558,7 @@ def _attempt(disc, beta, z0, drive, t_end, tol: Tolerance, profile_times, state:
         entry_prev=state.entry,
         profiles=profiles,
         profile_gaps=profile_gaps,
+        profile_films=profile_films,
     )
     kept = state._replace(
         dt_next=dt_next,
@@ -550,16 +597,19 @@ def rollout(
     tol: Tolerance = DEFAULT_TOLERANCE,
     profile_times=None,
     *,
+    substrate=None,
     mode: str = "forward",
 ) -> Trajectory:
     """Integrate a run from rest to ``t_end`` with error control.
 
     ``drive``: what moves the sphere (:mod:`lubjax._drives`: ``Travel``, ``Load``, ``Spring``,
     ``FreeSphere``), or a bare travel history (``RampHold``, ``SampledTravel``) for a prescribed
-    travel. Every drive takes this one code path. Pure and jit/vmap/jvp-compatible in ``beta``,
-    ``z0``, ``t_end`` and the drive's leaves. ``mode="reverse"`` also supports vjp /
-    ``jax.grad`` (a checkpointed scan over ``tol.max_steps`` attempts). Read values at any
-    times with :func:`evaluate`.
+    travel. ``substrate`` (:mod:`lubjax._substrate`): ``HalfSpace()`` (default), ``Layer``,
+    ``Viscoelastic``; ``disc`` must come from ``discretise(mesh, substrate)`` (the geometry's
+    influence matrix). Every drive and substrate takes this one code path. Pure and
+    jit/vmap/jvp-compatible in ``beta``, ``z0``, ``t_end`` and the drive's and substrate's
+    leaves. ``mode="reverse"`` also supports vjp / ``jax.grad`` (a checkpointed scan over
+    ``tol.max_steps`` attempts). Read values at any times with :func:`evaluate`.
     """
     if mode not in ("forward", "reverse"):
         raise ValueError(f"mode must be 'forward' or 'reverse', got {mode!r}")
@@ -570,14 +620,17 @@ def rollout(
         jnp.zeros((0,), dtype) if profile_times is None else jnp.asarray(profile_times, dtype)
     )
     drive = as_drive(drive)
+    substrate = as_substrate(substrate)
     # At rest at t_start, where the travel need not be zero (eq 23 starts t̄₁/2 above z̄0; a
     # measured history starts wherever its first sample is).
-    state0 = _initial_state(disc, beta, drive, z0, tol, profile_times)
+    state0 = _initial_state(disc, beta, drive, substrate, z0, tol, profile_times)
     zero = jnp.zeros((), dtype)
     first = _entry_of(
         disc, state0, zero, zero, jnp.asarray(True), jnp.asarray(False), jnp.zeros(2, jnp.int32)
     )
-    attempt = functools.partial(_attempt, disc, beta, z0, drive, t_end, tol, profile_times)
+    attempt = functools.partial(
+        _attempt, disc, beta, z0, drive, substrate, t_end, tol, profile_times
+    )
     idle = functools.partial(_idle, disc)
 
     def body(state, k):
@@ -613,6 +666,7 @@ def rollout(
         steps=steps,
         profiles=final.profiles,
         profile_gaps=final.profile_gaps,
+        profile_films=final.profile_films,
         status=final.status,
         accepted=final.accepted,
         rejected=final.rejected,

@@ -32,8 +32,8 @@ class SweepResult(NamedTuple):
     devices: int
 
 
-def _one(tol, disc, history, t_end, times, b, z):
-    traj = rollout(disc, b, z, history, t_end, tol, mode="forward")
+def _one(tol, disc, history, substrate, t_end, times, b, z):
+    traj = rollout(disc, b, z, history, t_end, tol, substrate=substrate, mode="forward")
     keep = traj.steps.accepted
     positive = jnp.all(jnp.where(keep, traj.steps.film_min > 0, True))
     ok = (traj.status == DONE) & positive
@@ -53,7 +53,7 @@ def _one(tol, disc, history, t_end, times, b, z):
 @functools.lru_cache(maxsize=8)
 def _batched(tol):
     one = functools.partial(_one, tol)
-    return jax.jit(jax.vmap(one, in_axes=(None, None, None, None, 0, 0)))
+    return jax.jit(jax.vmap(one, in_axes=(None, None, None, None, None, 0, 0)))
 
 
 
@@ -63,8 +63,8 @@ _COMPILED: dict = {}
 def _compiled_for(tol, args, device):
     """AOT-compile once per (device, mesh size, history, output count, tolerance, chunk size);
     returns (fn, seconds)."""
-    disc, history, _, times, b, _ = args
-    leaves, treedef = jax.tree_util.tree_flatten(history)
+    disc, history, substrate, _, times, b, _ = args
+    leaves, treedef = jax.tree_util.tree_flatten((history, substrate))
     shapes = tuple(np.shape(x) for x in leaves)
     key = (device.id, disc.r.shape[0], treedef, shapes, times.shape[0], tol, b.shape[0])
     if key in _COMPILED:
@@ -81,6 +81,7 @@ def sweep(
     *,
     history: RampHold | SampledTravel | None = None,
     drive=None,
+    substrate=None,
     settings: Settings | None = None,
     devices: int | None = None,
     times=None,
@@ -90,7 +91,7 @@ def sweep(
     All runs share one mesh; each takes its own error-controlled steps (``vmap`` of a
     ``while_loop``: the batch runs until its slowest member is done) and reports F̄ and min h̄
     at the shared output ``times`` (default 501 equally spaced) by its own interpolant; any
-    ``drive`` (shared by the batch) instead of the travel ``history``. The
+    ``drive`` (shared by the batch) instead of the travel ``history``, and any ``substrate``. The
     batch is padded to a multiple of the device count and split across ``devices`` (default:
     all of ``jax.devices()``). Failed runs are flagged in ``ok`` rather than raised, so one bad
     corner does not discard a map.
@@ -112,12 +113,14 @@ def sweep(
     n_dev = len(jax.devices()) if devices is None else int(devices)
     if not 1 <= n_dev <= len(jax.devices()):
         raise ValueError(f"devices must be in [1, {len(jax.devices())}], got {devices}")
-    plan = make_plan(t_end, history=history, drive=drive, settings=settings, times=times)
+    plan = make_plan(
+        t_end, history=history, drive=drive, substrate=substrate, settings=settings, times=times
+    )
     pad = (-b.size) % n_dev
     bp = np.concatenate([b, np.full(pad, b[-1])])
     zp = np.concatenate([z, np.full(pad, z[-1])])
     chunk = bp.size // n_dev
-    shared = (plan.disc, plan.drive, plan.t_end, plan.t)
+    shared = (plan.disc, plan.drive, plan.substrate, plan.t_end, plan.t)
     used = jax.devices()[:n_dev]
     per_device = [
         jax.device_put((*shared, bp[k * chunk:(k + 1) * chunk], zp[k * chunk:(k + 1) * chunk]), d)

@@ -1,0 +1,243 @@
+r"""Substrates: how the surface deflects under the film pressure. A scene picks exactly one.
+
+The stepper sees a substrate through two things only:
+
+* its **influence matrix** Ŵ (w̄ = -Ŵ ū for an elastic "load" ū), built once per mesh in numpy
+  and cached: :class:`HalfSpace` (the default, eqs 8b, 21) or :class:`Layer` (a layer of
+  thickness H̄ = H/√(R d_c) on a rigid base, bonded or frictionless; ``lubjax._layer``);
+* its **creep compliance** J(t̄) in units of the relaxed compliance 1/E*, as a generalised
+  Kelvin (Prony) series J(t̄) = J₀ + Σ_k J_k (1 - e^{-t̄/λ_k}), J₀ + Σ J_k = 1. An elastic
+  substrate has J ≡ J₀ = 1 and no terms.
+
+Viscoelasticity by the correspondence principle (constant ν): the elastic load is the
+convolution ū(t̄) = ∫ J(t̄ - s) dp̄(s) = J₀ p̄ + Σ_k q_k with internal variables
+
+    dq_k/dt̄ = (J_k p̄ - q_k)/λ_k,                                     (V)
+
+and the film is h̄ = z̄ + r̄²/2 + Ŵū. The step integrates (V) by the same BDF formula as the film,
+a₀q_kⁿ⁺¹ + a₁q_kⁿ + a₂q_kⁿ⁻¹ = Δt̄ (J_k p̄ⁿ⁺¹ - q_kⁿ⁺¹)/λ_k, which is linear in p̄ⁿ⁺¹:
+
+    ūⁿ⁺¹ = c p̄ⁿ⁺¹ + Σ_k (-a₁q_kⁿ - a₂q_kⁿ⁻¹)/(a₀ + Δt̄/λ_k),
+    c = J₀ + Σ_k (Δt̄J_k/λ_k)/(a₀ + Δt̄/λ_k),
+
+so every step is still one linear solve (the elastic block scaled by c); an elastic substrate
+gives c = 1 and ū = p̄ exactly, the same arithmetic as before. Dimensionless numbers use the
+*relaxed* modulus E*∞ (β, p̄, F̄ of eqs 7-8 with E* = E*∞): the relaxed limit (λ → 0) is the
+elastic solver at E*∞, the instantaneous one (λ → ∞) the elastic solver at E*₀ = E*∞/J₀.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._influence import influence_matrix
+from ._mesh import Mesh
+
+
+@dataclasses.dataclass(frozen=True)
+class HalfSpace:
+    """The elastic half-space (the paper's, and the default)."""
+
+    def influence(self, mesh: Mesh) -> np.ndarray:
+        return influence_matrix(mesh)
+
+    @property
+    def elastic(self):
+        return self
+
+    def compliance(self):
+        return _ELASTIC
+
+
+@dataclasses.dataclass(frozen=True)
+class Layer:
+    """An elastic layer of dimensionless thickness H̄ = H/√(R d_c) on a rigid base.
+
+    Args:
+        thickness: H̄ > 0 (``lubjax.layer_thickness_bar(H, R, d_c)`` from SI).
+        poisson: ν ∈ (-1, 0.5] (0.5: incompressible, PDMS and gels); E* = E/(1 - ν²) as for the
+            half-space, so H̄ → ∞ is the half-space.
+        interface: "bonded" (no slip at the base) or "frictionless".
+    """
+
+    thickness: float
+    poisson: float = 0.5
+    interface: str = "bonded"
+
+    def __post_init__(self):
+        h = self.thickness
+        if isinstance(h, bool) or not (isinstance(h, (int, float)) and math.isfinite(h) and h > 0):
+            raise ValueError(f"Layer.thickness must be a finite number > 0, got {h!r}")
+        nu = self.poisson
+        if not (isinstance(nu, (int, float)) and -1.0 < nu <= 0.5):
+            raise ValueError(f"Layer.poisson must be in (-1, 0.5], got {nu!r}")
+        if self.interface not in ("bonded", "frictionless"):
+            raise ValueError(
+                f"Layer.interface must be 'bonded' or 'frictionless', got {self.interface!r}"
+            )
+        object.__setattr__(self, "thickness", float(h))
+        object.__setattr__(self, "poisson", float(nu))
+
+    def influence(self, mesh: Mesh) -> np.ndarray:
+        from ._layer import layer_influence_matrix
+
+        return layer_influence_matrix(mesh, self.thickness, self.poisson, self.interface)
+
+    @property
+    def elastic(self):
+        return self
+
+    def compliance(self):
+        return _ELASTIC
+
+
+#: (J₀, J_k, λ_k) of an elastic substrate: the creep compliance in the stepper's form.
+_ELASTIC = (1.0, np.zeros(0), np.ones(0))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Viscoelastic:
+    """A linear viscoelastic substrate: ``elastic`` (HalfSpace or Layer) gives the geometry, a
+    creep compliance in Kelvin-Prony form the time dependence (see the module docstring).
+
+    Build it from the modulus with :meth:`standard_linear_solid` (one term) or
+    :meth:`from_prony` (several). Fields (pytree leaves: differentiable and batchable):
+
+    Args:
+        retardation: J_k/J∞ ≥ 0, the compliance that creeps in with time λ_k (sum < 1; the
+            instantaneous compliance is J₀ = 1 - Σ J_k).
+        times: λ_k > 0, retardation times in units of t_c.
+        elastic: HalfSpace() (default) or a Layer (static).
+    """
+
+    retardation: tuple | np.ndarray | jax.Array
+    times: tuple | np.ndarray | jax.Array
+    elastic: HalfSpace | Layer = HalfSpace()
+
+    def __post_init__(self):
+        if isinstance(self.retardation, jax.core.Tracer) or isinstance(self.times, jax.core.Tracer):
+            return
+        j = np.atleast_1d(np.asarray(self.retardation, np.float64))
+        lam = np.atleast_1d(np.asarray(self.times, np.float64))
+        if j.ndim != 1 or j.shape != lam.shape or j.size == 0:
+            raise ValueError("Viscoelastic needs 1-D retardation and times of the same length")
+        if not (np.all(np.isfinite(j)) and np.all(j >= 0) and j.sum() < 1):
+            raise ValueError(
+                f"Viscoelastic.retardation must be >= 0 with a sum < 1 (J₀ = 1 - sum > 0), got {j}"
+            )
+        if not (np.all(np.isfinite(lam)) and np.all(lam > 0)):
+            raise ValueError(f"Viscoelastic.times must be finite and > 0, got {lam}")
+        if not isinstance(self.elastic, (HalfSpace, Layer)):
+            raise ValueError("Viscoelastic.elastic must be HalfSpace() or a Layer")
+        object.__setattr__(self, "retardation", j)
+        object.__setattr__(self, "times", lam)
+
+    @classmethod
+    def standard_linear_solid(cls, stiffening, relaxation_time, elastic=None):
+        """One term: E(t) = E∞ + (E₀ - E∞) e^{-t/τ}, ``stiffening`` = E₀/E∞ > 1, τ =
+        ``relaxation_time`` (t_c units). Its compliance creeps with λ = τ E₀/E∞ from 1/E₀ to
+        1/E∞: J₁ = 1 - E∞/E₀. Differentiable in both (closed form)."""
+        m = jnp.asarray(stiffening, jnp.float64) if _traced(stiffening) else float(stiffening)
+        tau = jnp.asarray(relaxation_time, jnp.float64) if _traced(relaxation_time) else float(
+            relaxation_time
+        )
+        if not _traced(m) and not (m > 1 and math.isfinite(m)):
+            raise ValueError(f"stiffening E0/Einf must be > 1, got {stiffening!r}")
+        if not _traced(tau) and not (tau > 0 and math.isfinite(tau)):
+            raise ValueError(f"relaxation_time must be > 0, got {relaxation_time!r}")
+        ret = jnp.reshape(1.0 - 1.0 / m, (1,))
+        lam = jnp.reshape(tau * m, (1,))
+        if not _traced(m) and not _traced(tau):
+            ret, lam = np.asarray(ret), np.asarray(lam)
+        return cls(ret, lam, HalfSpace() if elastic is None else elastic)
+
+    @classmethod
+    def from_prony(cls, moduli, times, elastic=None):
+        """Relaxation modulus E(t)/E∞ = 1 + Σ_k g_k e^{-t/τ_k} (``moduli`` = g_k > 0,
+        ``times`` = τ_k > 0, t_c units) converted exactly to the compliance form: the
+        retardation rates are the roots of s Ē(s) (interlaced with the 1/τ_k), the weights its
+        residues (numpy, not traced: use :meth:`standard_linear_solid` to fit one term)."""
+        g = np.atleast_1d(np.asarray(moduli, np.float64))
+        tau = np.atleast_1d(np.asarray(times, np.float64))
+        if g.shape != tau.shape or g.ndim != 1 or g.size == 0:
+            raise ValueError("from_prony needs 1-D moduli and times of the same length")
+        if not (np.all(g > 0) and np.all(tau > 0) and np.all(np.isfinite(g * tau))):
+            raise ValueError(f"Prony moduli and times must be finite and > 0, got {g}, {tau}")
+        if np.unique(tau).size != tau.size:
+            raise ValueError("Prony times must be distinct")
+        order = np.argsort(tau)[::-1]  # poles 1/τ ascending
+        g, tau = g[order], tau[order]
+        poles = 1.0 / tau
+        from scipy.optimize import brentq
+
+        def s_modulus(s):  # s Ē(s)/E∞ = 1 + Σ g s/(s + 1/τ), evaluated at s = -x
+            return 1.0 + np.sum(g * (-s) / (-s + poles))
+
+        # Roots x of 1 + Σ g (-x)/(1/τ - x): one in each interval between consecutive poles,
+        # the first in (0, 1/τ_1).
+        edges = np.concatenate([[0.0], poles])
+        rates = []
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            eps = 1e-14 * hi
+            rates.append(brentq(s_modulus, lo + eps if lo > 0 else 0.0, hi - eps, xtol=1e-15,
+                                rtol=4 * np.finfo(float).eps, maxiter=500))
+        rates = np.asarray(rates)
+        # J(t) E∞ = 1 - Σ_k c_k e^{-x_k t}; c_k = -1/(x_k d/dx[s Ē(-x)]) from partial fractions.
+        deriv = np.array([np.sum(-g * poles / (poles - x) ** 2) for x in rates])
+        c = -1.0 / (rates * deriv)
+        j0 = 1.0 - np.sum(c)
+        if not (j0 > 0 and np.all(c > 0)):
+            raise ValueError("Prony conversion failed (non-positive compliance terms)")
+        return cls(c, 1.0 / rates, HalfSpace() if elastic is None else elastic)
+
+    def influence(self, mesh: Mesh) -> np.ndarray:
+        return self.elastic.influence(mesh)
+
+    def compliance(self):
+        ret = jnp.asarray(self.retardation)
+        return 1.0 - jnp.sum(ret), ret, jnp.asarray(self.times)
+
+    def compliance_at(self, t):
+        """J(t̄) E*∞ = J₀ + Σ J_k (1 - e^{-t̄/λ_k})."""
+        j0, jk, lam = self.compliance()
+        t = jnp.asarray(t)[..., None]
+        return j0 + jnp.sum(jk * (1 - jnp.exp(-t / lam)), axis=-1)
+
+
+def _traced(x):
+    return isinstance(x, jax.core.Tracer)
+
+
+def as_substrate(substrate):
+    if substrate is None:
+        return HalfSpace()
+    if isinstance(substrate, (HalfSpace, Layer, Viscoelastic)):
+        return substrate
+    raise TypeError(
+        "expected a substrate (lubjax.HalfSpace(), Layer(...), Viscoelastic(...)), "
+        f"got {type(substrate).__name__}"
+    )
+
+
+jax.tree_util.register_static(HalfSpace)
+jax.tree_util.register_static(Layer)
+
+
+def _flatten_visco(v):
+    return (v.retardation, v.times), v.elastic
+
+
+def _unflatten_visco(elastic, children):
+    obj = object.__new__(Viscoelastic)
+    object.__setattr__(obj, "retardation", children[0])
+    object.__setattr__(obj, "times", children[1])
+    object.__setattr__(obj, "elastic", elastic)
+    return obj
+
+
+jax.tree_util.register_pytree_node(Viscoelastic, _flatten_visco, _unflatten_visco)
