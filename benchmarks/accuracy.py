@@ -105,6 +105,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="β ∈ {10, 1000}, z̄0 ∈ {0.5, 1.11}")
     ap.add_argument("--rtol", type=float, default=None, help="tolerance of the runs checked")
+    ap.add_argument("--dr", type=float, default=None, help="fine-zone mesh spacing of the runs")
     ap.add_argument("--contact-radius", default=None, choices=("auto",),
                     help="refine the checked runs at the contact edge (Settings.contact_radius)")
     ap.add_argument("--out", default="benchmarks/out/accuracy.md")
@@ -116,9 +117,8 @@ def main(argv=None):
     betas, z0s = ((10.0, 1000.0), (0.5, 1.11)) if args.quick else (BETAS, Z0S)
     betas = args.betas or betas
     z0s = args.z0s or z0s
-    settings = lubjax.Settings(contact_radius=args.contact_radius)
-    if args.rtol is not None:
-        settings = lubjax.Settings(rtol=args.rtol, contact_radius=args.contact_radius)
+    given = dict(rtol=args.rtol, dr=args.dr, contact_radius=args.contact_radius)
+    settings = lubjax.Settings(**{k: v for k, v in given.items() if v is not None})
     rows = []
     for beta in betas:
         for z0 in z0s:
@@ -149,7 +149,8 @@ def main(argv=None):
         w.writeheader()
         w.writerows(rows)
     lines = [
-        f"Settings(rtol={settings.rtol:g}, contact_radius={settings.contact_radius!r}) "
+        f"Settings(rtol={settings.rtol:g}, dr={settings.dr}, "
+        f"contact_radius={settings.contact_radius!r}) "
         f"against converged runs, t̄ ∈ [0, 10³]; "
         f"{time.strftime('%Y-%m-%d')}, {label()}.",
         "",
