@@ -54,12 +54,21 @@ def _mesh_from_tolerance(rtol: float) -> tuple[float, float, float]:
     return dr, growth, length
 
 
-#: The mesh spacing at a refined contact edge is dr / RIM_REFINEMENT.
+#: The mesh spacing at a refined contact edge is dr / RIM_REFINEMENT, inside the contact
+#: dr / CONTACT_REFINEMENT (:func:`lubjax.graded_mesh` says why each).
 RIM_REFINEMENT = 7.0
+CONTACT_REFINEMENT = 2.0
+#: Late in a hold the neck at the contact edge thins as h̄_min ≈ NECK_CONSTANT/√(β t̄)
+#: (measured: h̄_min √(β t̄) = 0.12-0.28 for β ∈ [10, 10⁴], z̄0 ∈ [0.05, 0.9], t̄ ∈ [10, 10³];
+#: the larger value is taken, so a neck is thought resolvable rather than not).
+NECK_CONSTANT = 0.3
 
 
-def _final_contact_radius(drive, z0) -> float | None:
-    """Edge of the Hertz contact the drive ends in (dimensionless), or None."""
+def _final_contact_radius(drive, z0, dr) -> float | None:
+    """Edge of the Hertz contact the drive ends in (dimensionless): √(depth) for an indentation
+    depth ≥ 0; 0 (refine the axis) when the sphere stops short of the surface by less than
+    50 dr², where the pressure spot, ≈ √(2 z̄) wide, would span fewer than ~10 cells; None
+    otherwise (no contact, nothing thin to resolve)."""
     if isinstance(drive, Travel):
         samples = getattr(drive.history, "travel_samples", None)
         final = drive.history.travel(np.asarray([1e300])) if samples is None else samples
@@ -69,7 +78,30 @@ def _final_contact_radius(drive, z0) -> float | None:
         depth = (3.0 * final / (2.0 * math.pi)) ** (2.0 / 3.0)
     else:
         return None
-    return math.sqrt(depth) if depth > 0 else None
+    if depth >= 0:
+        return math.sqrt(depth)
+    return 0.0 if -depth < 50.0 * dr**2 else None
+
+
+def _neck_resolvable(beta, t_end, dr) -> bool:
+    """Whether the neck a hold ends with (width ≈ h̄_min^{2/3}) is at least a quarter of the
+    refined cell dr/RIM_REFINEMENT. Below that the film inside the contact is thinner than the
+    O(dr²) error of w̄ there and only zigzags from node to node (seen at β = 10⁶ held to t̄ = 10⁶,
+    h̄_min ~ 10⁻⁷): refining then buys no accuracy, only 10× the steps, so it is not done."""
+    neck = (NECK_CONSTANT / math.sqrt(beta * t_end)) ** (2.0 / 3.0)
+    return neck >= 0.25 * dr / RIM_REFINEMENT
+
+
+def _contact_refinement(settings, drive, z0, beta, t_end) -> float | None:
+    """The radius ``Settings.contact_radius="auto"`` refines around for one run, or None."""
+    if settings.contact_radius != "auto":
+        return None
+    dr = settings.mesh_parameters()[0]
+    rim = _final_contact_radius(drive, float(z0), dr)
+    # (outside the fine zone there is nothing to refine: the zone must be widened instead)
+    if rim is None or rim >= 0.95 * settings.r_fine:
+        return None
+    return rim if _neck_resolvable(float(beta), t_end, dr) else None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,14 +127,16 @@ class Settings:
         error_estimate: also run the nested coarse mesh (every other node) at rtol and at
             8·rtol, and return ``Result.force_error`` (about +30 % run time).
         contact_radius: refine the mesh to dr/7 around this r̄ (the Hertz contact's edge,
-            where a long hold drains through a thin neck; see :func:`lubjax.graded_mesh`).
-            None (default): no refinement. "auto": :func:`relax` takes the edge of the contact
-            the drive ends in, √(travel - z̄0) for a prescribed travel, √δ̄ of Hertz under a
-            load; none for a spring, a free sphere or no contact (z̄0 ≥ travel);
-            ``make_plan``/``sweep``/fits share one mesh across z̄0 and ignore "auto". Use it
-            for late holds with z̄0 < 1 (h̄_min at t̄ = 100, β = 10³: 14 % → 0.4 %). Not the
-            default: at β = 10⁶, z̄0 = 0.05 held to 10⁶ the refined neck made the controller
-            take > 20000 attempts (3500 without), and relax and sweep would differ.
+            where a long hold drains through a thin neck) and to dr/2 inside it (the trapped
+            film h̄(0)); 0 refines the axis (a sphere that just touches); see
+            :func:`lubjax.graded_mesh`. "auto" (default): :func:`relax` takes the edge of the
+            contact the drive ends in, √(travel - z̄0) for a prescribed travel, √δ̄ of Hertz
+            under a load, the axis when the sphere stops within 50 dr² of the surface; none
+            for a spring, a free sphere, no contact, or a neck the refined cell cannot resolve
+            (h̄_min ≈ 0.3/√(β t̄_end) thinner than (dr/28)^{3/2}: β t̄_end > 7·10⁸ at the
+            default dr; refining there only multiplied the steps). None: no refinement.
+            ``make_plan``/``sweep``/fits share one mesh across (β, z̄0) and refine only around
+            a number given here, so they can differ from ``relax`` in late thin films.
     """
 
     rtol: float = 3e-4
@@ -116,7 +150,7 @@ class Settings:
     max_steps: int = 20_000
     force_floor: float = 1e-8
     error_estimate: bool = True
-    contact_radius: float | str | None = None
+    contact_radius: float | str | None = "auto"
 
     def __post_init__(self):
         for name in ("rtol", "atol", "r_fine", "initial_step", "force_floor"):
@@ -137,10 +171,10 @@ class Settings:
                 raise ValueError(f"Settings.{name} must be > 0 or None, got {value!r}")
         c = self.contact_radius
         if not (c is None or c == "auto" or (
-            isinstance(c, numbers.Real) and not isinstance(c, bool) and 0 < c < self.r_fine
+            isinstance(c, numbers.Real) and not isinstance(c, bool) and 0 <= c < self.r_fine
         )):
             raise ValueError(
-                f"Settings.contact_radius must be 'auto', None or in (0, r_fine = "
+                f"Settings.contact_radius must be 'auto', None or in [0, r_fine = "
                 f"{self.r_fine:g}), got {c!r}"
             )
 
@@ -161,7 +195,10 @@ class Settings:
             rim = self.contact_radius
         if rim is None:
             return graded_mesh(dr, self.r_fine, length, growth)
-        return graded_mesh(dr, self.r_fine, length, growth, rim=rim, rim_dr=dr / RIM_REFINEMENT)
+        return graded_mesh(
+            dr, self.r_fine, length, growth, rim=rim, rim_dr=dr / RIM_REFINEMENT,
+            contact_dr=dr / CONTACT_REFINEMENT if rim > 0 else None,
+        )
 
     def tolerance(self) -> Tolerance:
         return Tolerance(
@@ -262,6 +299,31 @@ def force_curve(plan: Plan, beta, z0, times=None, *, mode: str = "reverse"):
     return evaluate(traj.steps, times, "force")
 
 
+#: The error estimate's observed orders: space 3/2 (the √ edge of a Hertz contact limits the
+#: second order of the scheme, tests/test_analytic_limits.py), time 1/2 in rtol (each segment
+#: starts with backward Euler; BDF2 alone gives 2/3). The lower orders make it conservative.
+SPACE_ORDER, TIME_ORDER = 1.5, 0.5
+#: Each estimate is the largest over this many accepted steps either side: the true error and
+#: its estimate change sign at different times, and a pointwise bound must cover both.
+ESTIMATE_WINDOW = 2
+
+
+def error_estimate(value, coarse, loose):
+    """Estimated global error of ``value`` (a run on the mesh at rtol) from the same quantity on
+    the nested coarse mesh (every other node) at rtol (``coarse``) and at 8 rtol (``loose``):
+
+        e_space = |y - y_coarse| / (2^{3/2} - 1),   e_time = |y_coarse - y_loose| / (8^{1/2} - 1),
+
+    Richardson's estimates at the orders :data:`SPACE_ORDER` and :data:`TIME_ORDER` (global
+    error ∝ Δr̄^{3/2} and ∝ rtol^{1/2}), summed and spread over ±``ESTIMATE_WINDOW`` steps."""
+    space = np.abs(value - coarse) / (2.0**SPACE_ORDER - 1.0)
+    time_ = np.abs(coarse - loose) / (8.0**TIME_ORDER - 1.0)
+    total = space + time_
+    padded = np.pad(total, ESTIMATE_WINDOW, mode="edge")
+    n = total.size
+    return np.max([padded[k:k + n] for k in range(2 * ESTIMATE_WINDOW + 1)], axis=0)
+
+
 def _check_x64():
     if not jax.config.jax_enable_x64:
         raise RuntimeError(
@@ -300,10 +362,11 @@ class Result:
         finite: no NaN/inf; film_positive: h̄ > 0 at every accepted step;
         finished: t_end reached (not stopped by the step budget or a collapsing step).
         force_error: estimated error of ``force`` at ``t`` (NaN if Settings.error_estimate is
-            off): space |F̄ - F̄_coarse|/3 (second order, nested mesh of every other node) plus
-            time |F̄_coarse - F̄_coarse(8 rtol)|/(8^{2/3} - 1) (global error ∝ rtol^{2/3}).
-            Zero where the drive prescribes the force. gap_error: the same for z̄ (zero
-            where the drive prescribes the travel).
+            off), from the nested coarse mesh at rtol and 8 rtol (:func:`error_estimate`).
+            Zero where the drive prescribes the force. gap_error, film_center_error,
+            film_min_error: the same for z̄ (zero where the drive prescribes the travel),
+            h̄(0) and min h̄. A film error near the film itself says the mesh does not resolve
+            that film (late thin necks at large β t̄).
         accepted, rejected: step counts. compile_s, run_s: wall time of compilation (0 when
         cached) and of the run itself.
     """
@@ -331,6 +394,8 @@ class Result:
     stop_reason: str
     force_error: np.ndarray
     gap_error: np.ndarray
+    film_center_error: np.ndarray
+    film_min_error: np.ndarray
     accepted: int
     rejected: int
     compile_s: float
@@ -360,6 +425,20 @@ class Result:
         if not self.finished:
             out.append(f"the run stopped at t̄ = {self.t[-1]:.4g} < t_end: {self.stop_reason}")
         return out
+
+    def unresolved_film(self, fraction: float = 0.3) -> str | None:
+        """A note if the estimated error of min h̄ exceeds ``fraction`` of it anywhere (the mesh
+        does not resolve that film: late necks at large β t̄), else None. Not an error: the
+        force can still be accurate (it is Hertz's there)."""
+        bad = self.film_min_error > fraction * np.abs(self.film_min)
+        if not np.any(bad):
+            return None
+        i = int(np.argmax(bad))
+        return (
+            f"from t̄ = {self.t[i]:.4g} the thinnest film (h̄_min = {self.film_min[i]:.3g}) is "
+            f"below what the mesh resolves (estimated error {self.film_min_error[i]:.2g}); "
+            "refine Settings.dr (CLI: --dr) if the film matters"
+        )
 
 
 _COMPILED: dict = {}
@@ -427,12 +506,7 @@ def relax(
     t_start = float(history.t_start)
     t_end = _check_t_end(t_end, t_start)
     ptimes = _check_times(profile_times, "profile_times", t_start, t_end)
-    rim = None
-    if settings.contact_radius == "auto":
-        rim = _final_contact_radius(history, float(z0))
-        # (outside the fine zone there is nothing to refine: the zone must be widened instead)
-        rim = rim if rim is not None and rim < 0.95 * settings.r_fine else None
-    mesh = settings.mesh(rim)
+    mesh = settings.mesh(_contact_refinement(settings, history, z0, beta, t_end))
     substrate = as_substrate(substrate)
     disc = discretise(mesh, substrate)
     tol = settings.tolerance()
@@ -464,14 +538,13 @@ def relax(
     # w̄ = -Ŵū from h̄ = z̄ + r̄²/2 - w̄ (ū ≠ p̄ on a viscoelastic substrate)
     w = z[:, None] + 0.5 * np.asarray(disc.r) ** 2 - h
     def estimate(field):
-        """Space: |y - y_coarse|/3 (second order, nested mesh of every other node); time:
-        |y_coarse - y_coarse(8 rtol)|/(8^{2/3} - 1) (global error ∝ rtol^{2/3})."""
         if not settings.error_estimate:
             return np.full_like(series[field], np.nan)
         coarse, loose = (np.asarray(evaluate(tr.steps, series["t"], field)) for tr in trajs[1:])
-        return np.abs(series[field] - coarse) / 3 + np.abs(coarse - loose) / (8 ** (2 / 3) - 1)
+        return error_estimate(series[field], coarse, loose)
 
     force_error, gap_error = estimate("force"), estimate("gap")
+    film_center_error, film_min_error = estimate("film_center"), estimate("film_min")
     status = int(traj.status)
     finished = status == DONE
     if finished:
@@ -502,6 +575,8 @@ def relax(
         stop_reason=reason,
         force_error=force_error,
         gap_error=gap_error,
+        film_center_error=film_center_error,
+        film_min_error=film_min_error,
         accepted=int(traj.accepted),
         rejected=int(traj.rejected),
         compile_s=compile_s,

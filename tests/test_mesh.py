@@ -1,0 +1,60 @@
+"""The mesh a run gets: refined where the late hold needs it (contact edge, contact interior, the
+axis of a sphere that just touches), and not where the neck is beyond any mesh."""
+
+import numpy as np
+import pytest
+
+import lubjax
+from lubjax._solve import _contact_refinement
+
+RAMP = lubjax.as_drive(lubjax.RampHold())
+
+
+def test_refined_rim_and_contact_interior():
+    dr, rim = 0.014, 0.7
+    mesh = lubjax.graded_mesh(dr, 1.6, 100.0, 1.05, rim=rim, rim_dr=dr / 7, contact_dr=dr / 2)
+    r = mesh.r
+    cells = np.diff(r)
+    at_rim = cells[np.argmin(np.abs(r[:-1] - rim))]
+    assert at_rim < 1.1 * dr / 7
+    inside = cells[r[1:] < rim]
+    assert inside.max() <= 1.01 * dr / 2
+    outside = cells[(r[:-1] > rim + 0.2) & (r[1:] <= 1.6)]
+    assert outside.max() == pytest.approx(dr, rel=0.05)
+
+
+def test_axis_refinement_for_a_sphere_that_just_touches():
+    dr = 0.014
+    mesh = lubjax.graded_mesh(dr, 1.6, 100.0, 1.05, rim=0.0, rim_dr=dr / 7)
+    cells = np.diff(mesh.r)
+    assert cells[0] == pytest.approx(dr / 7, rel=0.05)
+    assert np.all(np.diff(cells[:20]) > 0)  # growing away from the axis
+    with pytest.raises(ValueError, match="contact_dr"):
+        lubjax.graded_mesh(dr, 1.6, 100.0, 1.05, contact_dr=dr / 2)
+
+
+@pytest.mark.parametrize(
+    "beta, z0, t_end, expected",
+    [
+        (1000.0, 0.5, 1e3, np.sqrt(0.5)),  # Hertz edge of the final contact
+        (100.0, 1.0, 1e3, 0.0),  # just touches: the pressure spot shrinks onto the axis
+        (100.0, 1.0005, 1e3, 0.0),  # stops 5e-4 short: spot ≈ 0.03 wide, still refined
+        (100.0, 1.11, 1e3, None),  # no contact, gap 0.11: nothing thin to resolve
+        (1e6, 0.05, 1e6, None),  # neck ~1e-7 thick: beyond any refined cell, not refined
+    ],
+)
+def test_auto_refinement_follows_the_contact_the_run_ends_in(beta, z0, t_end, expected):
+    rim = _contact_refinement(lubjax.Settings(), RAMP, z0, beta, t_end)
+    if expected is None:
+        assert rim is None
+    else:
+        assert rim == pytest.approx(expected)
+    assert _contact_refinement(lubjax.Settings(contact_radius=None), RAMP, z0, beta, t_end) is None
+
+
+def test_relax_refines_its_mesh_by_default():
+    coarse = dict(dr=0.05, mesh_growth=1.2, length=50.0, error_estimate=False)
+    auto = lubjax.relax(100.0, 0.5, 1.5, settings=lubjax.Settings(**coarse))
+    plain = lubjax.relax(100.0, 0.5, 1.5, settings=lubjax.Settings(**coarse, contact_radius=None))
+    assert auto.r.size > plain.r.size
+    assert np.min(np.diff(auto.r)) == pytest.approx(0.05 / 7, rel=0.1)
