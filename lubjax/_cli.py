@@ -232,6 +232,7 @@ def _drive_json(res, scales, z0_m):
         "h_center_m": (res.film_center * d).tolist(),
         "gap_error_m": (res.gap_error * d).tolist(),
         "force_error_N": (res.force_error * scales["force_N"]).tolist(),
+        "h_min_error_m": (res.film_min_error * d).tolist(),
         "steps": res.accepted,
         "rejected_steps": res.rejected,
         "run_s": res.run_s,
@@ -411,6 +412,8 @@ def _relax(args) -> int:
         "run_s": res.run_s,
         "compile_s": res.compile_s,
         "force_error": res.force_error.tolist(),
+        "h_min_error": res.film_min_error.tolist(),
+        "h_center_error": res.film_center_error.tolist(),
         "steps": res.accepted,
         "rejected_steps": res.rejected,
         "ok": res.ok,
@@ -434,6 +437,9 @@ def _relax(args) -> int:
         f"{res.accepted} steps ({res.rejected} rejected), run {res.run_s:.3f} s, "
         f"compile {res.compile_s:.2f} s"
     )
+    note = res.unresolved_film()
+    if note:
+        print(f"note: {note}")
     if args.out:
         with atomic_open(args.out, "w") as f:
             json.dump(out, f)

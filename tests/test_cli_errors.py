@@ -57,7 +57,9 @@ def _fake_result(t_end=1.0, n=20):
         t=t, force=np.sin(t) + 0.1, film_min=0.5 - 0.1 * t, film_center=0.6 - 0.1 * t,
         run_s=0.01, compile_s=0.02, ok=True, beta=100.0, z0=0.5, r=r,
         profile_times=np.array([0.5, 1.0]), pressure=np.ones((2, 30)), film=np.ones((2, 30)),
-        force_error=np.full(n, 1e-4), accepted=n - 1, rejected=0,
+        force_error=np.full(n, 1e-4), film_min_error=np.full(n, 1e-5),
+        film_center_error=np.full(n, 1e-5), accepted=n - 1, rejected=0,
+        unresolved_film=lambda: None,
     )  # fmt: skip
 
 
