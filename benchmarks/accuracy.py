@@ -5,7 +5,7 @@
 Cases: β ∈ {1, 10, 100, 1000} × z̄0 ∈ {0.5, 0.9, 1, 1.11, 2}, ramp then hold to t̄ = 10³. Every
 run is read at the same output times (500 in [0.01, 5], 200 log-spaced in [5, 10³]) by the
 stepper's own interpolant. The reference is a tight run (rtol 1e-7, atol 1e-16, dr = 0.005, mesh
-growth 1.02, L̄ = 2000); a second tight run (rtol 3e-7, dr = 0.0075, growth 1.03, L̄ = 1000) shows how
+growth 1.04, L̄ = 1000); a second tight run (rtol 3e-7, dr = 0.0075, growth 1.06, L̄ = 500) shows how
 far the reference itself is converged ("ref. change" columns). Reference runs are cached in
 benchmarks/out/cache/ (delete to recompute).
 
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import hashlib
 import os
 import sys
 import time
@@ -33,15 +34,18 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import lubjax  # noqa: E402
 from benchmarks.machine import label  # noqa: E402
+from lubjax._solve import _final_contact_radius  # noqa: E402
 
 BETAS = (1.0, 10.0, 100.0, 1000.0)
 Z0S = (0.5, 0.9, 1.0, 1.11, 2.0)
 T_END = 1e3
 T_OUT = np.unique(np.concatenate([np.linspace(0.01, 5.0, 500), np.geomspace(5.0, T_END, 200)]))
-REFERENCE = lubjax.Settings(rtol=1e-7, atol=1e-16, dr=0.005, mesh_growth=1.02, length=2000.0,
+# The far field converges fast in the mesh growth (benchmarks/mesh_rule.py: F̄ error 1.5e-5 of
+# the peak at growth 1.05, Δr̄ = 0.014), so the references spend their nodes in the fine zone.
+REFERENCE = lubjax.Settings(rtol=1e-7, atol=1e-16, dr=0.005, mesh_growth=1.04, length=1000.0,
                             max_steps=400_000, error_estimate=False, contact_radius="auto")
-REFERENCE_CHECK = lubjax.Settings(rtol=3e-7, atol=1e-16, dr=0.0075, mesh_growth=1.03,
-                                  length=1000.0, max_steps=400_000, error_estimate=False,
+REFERENCE_CHECK = lubjax.Settings(rtol=3e-7, atol=1e-16, dr=0.0075, mesh_growth=1.06,
+                                  length=500.0, max_steps=400_000, error_estimate=False,
                                   contact_radius="auto")
 CACHE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out", "cache")
 FIELDS = ("force", "film_center", "film_min")
@@ -64,11 +68,14 @@ def estimate_quality(out, res, ref):
 
 
 def cache_path(beta, z0, tag):
-    # accuracy3: references refined at the contact edge (Settings.contact_radius="auto", which
-    # changes the mesh only where z̄0 < 1); the accuracy2 ones under-resolved the neck there
-    # (their late h̄_min was ~10 % off at β = 10³, z̄0 = 0.5).
-    version = "accuracy3" if z0 < 1 else "accuracy2"
-    return os.path.join(CACHE, f"{version}_{tag}_b{beta:g}_z{z0:g}.npz")
+    """The cached reference of a case: named by its settings and the mesh they give for that
+    case, so a change to either (e.g. the contact-edge refinement) computes a new one."""
+    settings = REFERENCE if tag == "ref" else REFERENCE_CHECK
+    drive = lubjax.as_drive(lubjax.RampHold())
+    rim = _final_contact_radius(drive, z0, settings.mesh_parameters()[0])
+    key = repr((settings, settings.mesh(rim).nodes, T_END)).encode()
+    digest = hashlib.sha1(key).hexdigest()[:10]
+    return os.path.join(CACHE, f"{tag}_b{beta:g}_z{z0:g}_{digest}.npz")
 
 
 def reference(beta, z0, settings, tag):
