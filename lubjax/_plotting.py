@@ -95,6 +95,11 @@ def plot_drive(res, path: str, kind: str, test) -> None:
                  f" V = {test.speed:.3g} m/s, x0 = {test.gap:.3g} m")
     for a in ax[:3]:
         a.set_xlabel("t [s]")
+    if kind == "creep":
+        # Creep spans decades (the elastic indentation in the ramp, the drainage after it).
+        for a in (ax[0], ax[2]):
+            a.set_xscale("log")
+            a.set_xlim(max(t[1], 1e-3 * t[-1]), t[-1])
     ax[0].legend(fontsize=8)
     ax[2].semilogy(t, np.clip(res.film_min * d, 1e-15, None), "k-", label="min h")
     ax[2].semilogy(t, np.clip(res.film_center * d, 1e-15, None), "g--", label="h(0)")
