@@ -9,9 +9,8 @@ parameter, z = (estimate - truth)/reported error; honest errors give rms z ≈ 1
 draws scatters by ≈ 1/√(2N) around it: ±0.14 at N = 24, ±0.09 at N = 60). The white-noise
 errors alone (no AR(1) sandwich, no solver error) are shown beside them.
 
-The fit runs at ``COVERAGE_SETTINGS`` (rtol 1e-3, 143 nodes: coarser than the default, so the
-solver-error part of the budget is exercised, and cheap enough for the test suite) on the trace
-cut to t̄ ≤ ``--t-bar``. Writes benchmarks/out/fit_coverage.md.
+The fit runs at its default ``fitting.FIT_SETTINGS`` (rtol 1e-3, 143 nodes) on the trace cut to
+t̄ ≤ ``--t-bar``. Writes benchmarks/out/fit_coverage.md.
 """
 
 from __future__ import annotations
@@ -26,9 +25,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 import fitting  # noqa: E402
-import lubjax  # noqa: E402
 
-COVERAGE_SETTINGS = lubjax.Settings(rtol=1e-3, force_floor=1e-5, max_steps=3000)
+COVERAGE_SETTINGS = fitting.FIT_SETTINGS
 TRUE = {"E_star": "true_E_star_Pa", "viscosity": "true_viscosity_Pa_s", "z0": "true_z0_m"}
 
 

@@ -100,18 +100,20 @@ def plot_fit(res: FitResult, path: str) -> None:
     ax2.grid(alpha=0.3)
     ax4 = fig.add_subplot(gs[2, 0])
     r = resid - np.mean(resid)
-    lags = np.arange(0, min(60, r.size // 4))
+    lags = np.arange(1, min(60, r.size // 4))
     acf = np.array([float(r[k:] @ r[: r.size - k]) for k in lags]) / max(float(r @ r), 1e-300)
     ax4.bar(lags, acf, width=0.8, color="C0")
     band = 2 / np.sqrt(r.size)
-    ax4.axhspan(-band, band, color="0.85", zorder=0)
+    ax4.axhspan(-band, band, color="0.85", zorder=0, label="±2/√n (white noise)")
+    ax4.set_ylim(min(-3 * band, 1.1 * acf.min()), max(3 * band, 1.1 * acf.max()))
     ax4.set_xlabel("lag [samples]")
-    ax4.set_ylabel("residual ACF")
+    ax4.set_ylabel("residual autocorr.")
+    ax4.legend(loc="upper right", fontsize=8)
     ax4.grid(alpha=0.3)
     ax3 = fig.add_subplot(gs[:, 1])
     ax3.axis("off")
     ax3.text(0.0, 1.0, fit_report(res), transform=ax3.transAxes, va="top", ha="left",
-             family="monospace", fontsize=6.3)
+             family="monospace", fontsize=6.8)
     try:
         save_figure(fig, path, dpi=120, bbox_inches="tight")
     finally:
@@ -248,8 +250,6 @@ def _spec_options(args, n_traces):
 def _run(args) -> int:
     check_distinct_inputs(args.traces, "trace")
     spec_kw, shared = _spec_options(args, len(args.traces))
-    if not args.no_cache:
-        enable_compilation_cache()
     plots = []
     if args.plot is not None:
         if not args.plot.strip():
@@ -275,6 +275,8 @@ def _run(args) -> int:
         traces = [read_trace(path) for path in args.traces]
         spec = ModelSpec(drive=_common_drive(traces, args.drive), **spec_kw)
         prepare_outputs(outputs)  # creates missing folders: only once the inputs are good
+        if not args.no_cache:  # a repeated call loads the compiled solver instead of compiling
+            enable_compilation_cache()
         progress(f"read {len(traces)} trace(s); compiling the solver (first call only) ...")
         kw = dict(shared=shared, method=args.method, max_iter=args.max_iter, noise=args.noise,
                   progress=progress)
