@@ -10,14 +10,15 @@
 2. ``batch``: ``--batch`` noise draws (1 % of the peak) of the three clean paper traces, fitted
    separately in one ``fit_traces`` call (one vmap over all traces per iteration), in a fresh
    process with a warm cache; total wall time and how many converged near the truth.
-3. ``optimisers``: the hand-written Levenberg–Marquardt (``lm``) against
+3. ``joint``: the three paper traces fitted separately and jointly (E*, η shared).
+4. ``optimisers``: the hand-written Levenberg–Marquardt (``lm``) against
    ``scipy.optimize.least_squares`` (``trf``, with our Jacobian), ``optax.lbfgs`` (reverse-mode
    gradient) and, with ``--optimistix``, ``optimistix.LevenbergMarquardt`` (its own Jacobian by
    jax.jacfwd through the same model), from the physics start and from bad starts (each of E*,
    η, z0 off by a factor): model runs, iterations, wall time (compilation excluded: every
    method is warmed up first), final χ² against the best found, converged.
 
-Writes benchmarks/out/fit_benchmark.{json,md}; the machine and its load are in both.
+Writes benchmarks/out/fit_benchmark_<parts>.{json,md}; the machine and its load are in both.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import argparse
 import json
 import math
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -48,14 +50,19 @@ def _cli(args, cache_dir, extra_env=None):
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "fit.json")
         start = time.perf_counter()
+        cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         proc = subprocess.run([sys.executable, "-m", "fitting", *args, "--out", out, "--quiet"],
                               env=env, capture_output=True, text=True)
         wall = time.perf_counter() - start
+        cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        # CPU seconds of the process: on a loaded machine the wall time measures the load.
+        cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
         if proc.returncode not in (0, 1):
             raise RuntimeError(proc.stderr.strip().splitlines()[-1])
         res = json.load(open(out))
     res = res if isinstance(res, list) else [res]
-    return dict(process_s=wall, fit_wall_s=res[0]["wall_s"], converged=res[0]["converged"])
+    return dict(process_s=wall, process_cpu_s=cpu, fit_wall_s=res[0]["wall_s"],
+                converged=res[0]["converged"])
 
 
 def single():
@@ -83,13 +90,13 @@ for k in range({n}):
     c = clean[k % 3]
     sigma = 0.01 * float(np.max(c.force))
     traces.append(c._replace(force=c.force + rng.normal(0, sigma, c.force.size), name=f"d{{k}}"))
-fitting.fit_traces(traces[:{warm}])  # compile (and fill the cache) at this batch size
-start = time.perf_counter()
+fitting.fit_traces(traces, max_iter=1)  # compile everything at this batch size (not timed)
+start, cpu = time.perf_counter(), time.process_time()
 res = fitting.fit_traces(traces)
-wall = time.perf_counter() - start
+wall, cpu = time.perf_counter() - start, time.process_time() - cpu
 true = [float(c.metadata["true_E_star_Pa"]) for c in clean]
 z = [abs(r.E_star - true[k % 3]) / r.stderr["E_star"] for k, r in enumerate(res)]
-print(json.dumps(dict(traces=len(traces), wall_s=wall, per_trace_s=wall / len(traces),
+print(json.dumps(dict(traces=len(traces), wall_s=wall, cpu_s=cpu, per_trace_s=wall / len(traces),
       converged=int(sum(r.converged for r in res)), within_3se=int(sum(v < 3 for v in z)),
       iterations_max=int(max(r.n_iterations for r in res)), model_runs=res[0].n_model_runs)))
 """
@@ -97,7 +104,7 @@ print(json.dumps(dict(traces=len(traces), wall_s=wall, per_trace_s=wall / len(tr
 
 def batch(n):
     with tempfile.TemporaryDirectory() as cache:
-        code = BATCH_CHILD.format(root=ROOT, cache=cache, n=n, warm=n)
+        code = BATCH_CHILD.format(root=ROOT, cache=cache, n=n)
         start = time.perf_counter()
         proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                               env=dict(os.environ, PYTHONPATH=ROOT))
@@ -122,8 +129,9 @@ STARTS = [
 ]
 
 
-def _optimistix_fit(trace, start):
-    """optimistix.LevenbergMarquardt on the same residuals (its Jacobian by jax.jacfwd)."""
+def _optimistix_runner(trace):
+    """optimistix.LevenbergMarquardt on the same residuals (its Jacobian by forward mode through
+    the same model), compiled once for all starts."""
     import jax
     import jax.numpy as jnp
     import optimistix as optx
@@ -136,38 +144,51 @@ def _optimistix_fit(trace, start):
     sc = fitting.scales_from_trace(trace)
     solver = fitting.make_solver()
     data = fitting.trace_data(trace, sc, spec)
-    x0 = jnp.array([_model.to_theta(n, start.values[n], sc.response_unit) for n in spec.names])
 
     def fn(x, _):
         r, film = fitting.residuals(x, data, solver, spec)
         return jnp.where(film > 0, r, 1e3)
 
-    lm = optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)
-    run = jax.jit(lambda x: optx.least_squares(fn, lm, x, options=dict(jac="fwd"),
-                                               max_steps=60, throw=False))
-    with single_threaded_blas():
-        jax.block_until_ready(run(x0).value)  # compile
-        t0 = time.perf_counter()
-        sol = run(x0)
-        jax.block_until_ready(sol.value)
-        wall = time.perf_counter() - t0
-    r = np.asarray(fn(sol.value, None))
-    return dict(chi2=float(r @ r), iterations=int(sol.stats["num_steps"]), model_runs=None,
-                wall_s=wall, converged=bool(sol.result == optx.RESULTS.successful))
+    # Stop when no component of θ moves by more than 1e-4 (≈ 0.3 standard errors of ln z0,
+    # 0.01 of ln E*), as tight as the stall test of our LM; rtol 1e-8 ran 46 steps to the same
+    # optimum (chi2 within 0.02), chasing the error-controlled model's own noise.
+    lm = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-4)
+    def solve(x):
+        sol = optx.least_squares(fn, lm, x, options=dict(jac="fwd"), max_steps=60, throw=False)
+        return sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"]
+
+    run = jax.jit(solve)
+    residual = jax.jit(lambda x: fn(x, None))
+
+    def fit(start):
+        x0 = jnp.array([_model.to_theta(n, start.values[n], sc.response_unit)
+                        for n in spec.names])
+        with single_threaded_blas():
+            t0 = time.perf_counter()
+            value, ok, steps = jax.block_until_ready(run(x0))
+            wall = time.perf_counter() - t0
+            r = np.asarray(residual(value))
+        return dict(chi2=float(r @ r), iterations=int(steps), model_runs=None, wall_s=wall,
+                    converged=bool(ok))
+
+    return fit
 
 
-def optimisers(optimistix_path=None):
+def optimisers(optimistix_path=None, methods=("lm", "trf", "lbfgs", "optimistix")):
     import fitting
 
     trace = fitting.read_trace(TRACE)
     sc = fitting.scales_from_trace(trace)
     base = fitting.initial_guess(trace, sc)
-    methods = ["lm", "trf", "lbfgs"] + (["optimistix"] if optimistix_path else [])
+    methods = [m for m in methods if m != "optimistix" or optimistix_path]
     if optimistix_path:
         sys.path.insert(0, optimistix_path)
     rows = []
     for method in methods:
-        if method != "optimistix":  # compile outside the timings
+        if method == "optimistix":
+            runner = _optimistix_runner(trace)
+            runner(base)  # compile outside the timings
+        else:  # compile outside the timings
             fitting.fit_trace(trace, method=method, max_iter=2, model_error=False)
         for label, (fe, fv, fz) in STARTS:
             values = dict(base.values, E_star=base.values["E_star"] * fe,
@@ -175,7 +196,7 @@ def optimisers(optimistix_path=None):
             start = fitting.Start(values, (label,))
             t0 = time.perf_counter()
             if method == "optimistix":
-                row = _optimistix_fit(trace, start)
+                row = runner(start)
             else:
                 res = fitting.fit_trace(trace, method=method, starts=[start], model_error=False)
                 row = dict(chi2=res.stats["chi2"], iterations=res.n_iterations,
@@ -186,10 +207,29 @@ def optimisers(optimistix_path=None):
             print(json.dumps(row), flush=True)
     best = min(r["chi2"] for r in rows if math.isfinite(r["chi2"]))
     for r in rows:
-        # "reached": within 0.01 of the best χ² found (a thousandth of a standard error)
-        r["reached_optimum"] = bool(r["chi2"] - best < 0.01)
+        # "reached": χ² within 0.25 of the best found, i.e. the parameters within about half a
+        # standard error of it (LM stops once the remaining step is < 5 % of σ² in χ², at the
+        # error-controlled model's accuracy, so repeated fits end within ~0.1 of each other)
+        r["reached_optimum"] = bool(r["chi2"] - best < 0.25)
         r["chi2_above_best"] = r["chi2"] - best
     return dict(rows=rows, best_chi2=best, uptime=os.getloadavg())
+
+
+def joint():
+    """The three paper traces separately and jointly (E*, η shared): values and errors."""
+    import fitting
+
+    traces = [fitting.read_trace(os.path.join(ROOT, "data", f"{s}.csv"))
+              for s in ("paper_dc126", "paper_dc140", "paper_dc154")]
+    rows = []
+    for label, kw in [("separate", {}), ("joint E*, eta", dict(shared=("E_star", "viscosity")))]:
+        for r in fitting.fit_traces(traces, **kw):
+            rows.append(dict(fit=label, trace=os.path.basename(r.name),
+                             **{n: [r.values[n], r.stderr[n]] for n in ("E_star", "viscosity",
+                                                                         "z0")},
+                             converged=r.converged))
+            print(json.dumps(rows[-1]), flush=True)
+    return dict(rows=rows, uptime=os.getloadavg())
 
 
 def _markdown(report):
@@ -197,17 +237,29 @@ def _markdown(report):
     if "single" in report:
         s = report["single"]
         lines += ["## One fit of data/paper_dc140.csv (`lubjax-fit`, fresh process each)", "",
-                  "| run | process wall [s] | fit wall_s [s] |", "|---|---|---|"]
+                  "| run | process wall [s] | process CPU [s] | fit wall_s [s] |",
+                  "|---|---|---|---|"]
         for key in ("cold", "warm", "warm_again", "no_cache"):
-            lines.append(f"| {key} | {s[key]['process_s']:.1f} | {s[key]['fit_wall_s']:.2f} |")
+            lines.append(f"| {key} | {s[key]['process_s']:.1f} | "
+                         f"{s[key].get('process_cpu_s', float('nan')):.1f} | "
+                         f"{s[key]['fit_wall_s']:.2f} |")
         lines += ["", f"load average during the runs: {s['uptime']}", ""]
     if "batch" in report:
         b = report["batch"]
         lines += [f"## {b['traces']} traces in one call (warm cache)", "",
-                  f"wall {b['wall_s']:.1f} s ({b['per_trace_s']:.2f} s per trace), "
+                  f"wall {b['wall_s']:.1f} s ({b['per_trace_s']:.2f} s per trace; CPU "
+                  f"{b.get('cpu_s', float('nan')):.1f} s), "
                   f"{b['converged']} converged, {b['within_3se']} with E* within 3 standard "
                   f"errors of the truth, {b['iterations_max']} iterations at most, "
                   f"{b['model_runs']} batched model runs; load {b['uptime']}", ""]
+    if "joint" in report:
+        lines += ["## Separate and joint fits of the paper traces", "",
+                  "| fit | trace | E* [MPa] | η [Pa s] | z0 [μm] |", "|---|---|---|---|---|"]
+        for r in report["joint"]["rows"]:
+            e, v, z = r["E_star"], r["viscosity"], r["z0"]
+            lines.append(f"| {r['fit']} | {r['trace']} | {e[0] / 1e6:.4f} ± {e[1] / 1e6:.4f} | "
+                         f"{v[0]:.2f} ± {v[1]:.2f} | {z[0] * 1e6:.3f} ± {z[1] * 1e6:.3f} |")
+        lines += ["", f"load average: {report['joint']['uptime']}", ""]
     if "optimisers" in report:
         o = report["optimisers"]
         lines += ["## Optimisers on data/paper_dc140.csv (compilation excluded)", "",
@@ -223,9 +275,10 @@ def _markdown(report):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--only", default="single,batch,optimisers")
+    p.add_argument("--only", default="single,batch,joint,optimisers")
     p.add_argument("--batch", type=int, default=100)
     p.add_argument("--optimistix", help="folder with optimistix installed (benchmark only)")
+    p.add_argument("--methods", default="lm,trf,lbfgs,optimistix")
     args = p.parse_args(argv)
     parts = args.only.split(",")
     report = {"machine": _machine()}
@@ -235,10 +288,12 @@ def main(argv=None):
     if "batch" in parts:
         report["batch"] = batch(args.batch)
         print(json.dumps(report["batch"]), flush=True)
+    if "joint" in parts:
+        report["joint"] = joint()
     if "optimisers" in parts:
-        report["optimisers"] = optimisers(args.optimistix)
+        report["optimisers"] = optimisers(args.optimistix, args.methods.split(","))
     os.makedirs(OUT, exist_ok=True)
-    stem = os.path.join(OUT, "fit_benchmark" + ("" if len(parts) == 3 else "_" + "_".join(parts)))
+    stem = os.path.join(OUT, "fit_benchmark_" + "_".join(parts))
     with open(stem + ".json", "w") as fh:
         json.dump(report, fh, indent=2)
     with open(stem + ".md", "w") as fh:

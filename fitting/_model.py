@@ -346,7 +346,7 @@ def trace_data(
         drive_unit = math.pi * trace.meta_float("stiffness_N_m") / (2 * math.sqrt(R * dc))
     else:
         drive_unit = 0.0
-    disc = None if spec.layer is None else lubjax.discretise(
+    disc = None if spec.layer is None else _layer_disc(
         FIT_SETTINGS.mesh() if mesh is None else mesh, layer_substrate(spec, scales)
     )
     sigma = max(noise_level(response), 1e-6 * scales.response_unit)
@@ -365,6 +365,16 @@ def trace_data(
         drive_unit=jnp.asarray(drive_unit),
         disc=disc,
     )
+
+
+def _layer_disc(mesh, layer):
+    try:
+        return lubjax.discretise(mesh, layer)
+    except ImportError as exc:  # lubjax/_layer.py (the layer's influence matrix) is missing
+        raise RuntimeError(
+            f"the layer substrate needs the layer's influence matrix (lubjax/_layer.py), which "
+            f"this installation lacks ({exc})"
+        ) from None
 
 
 def history_size(trace: Trace, scales: Scales) -> int:
