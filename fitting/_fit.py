@@ -289,7 +289,7 @@ class _Evaluator:
     def __init__(self, data, solver, spec, layout: _Layout, groups):
         self.data, self.solver, self.spec = data, solver, spec
         self.layout, self.groups = layout, groups
-        self.rj, self.pred = _model.batched_functions(spec)
+        self.rj = _model.batched_functions(spec)[0]
         self.runs = 0
 
     def thetas(self, xs):
@@ -310,11 +310,6 @@ class _Evaluator:
                 film[t] > 0 for t in members))
             out.append((rk, Jk, ok))
         return out
-
-    def predict(self, xs):
-        with single_threaded_blas():
-            y, _ = self.pred(jnp.asarray(self.thetas(xs)), self.data, self.solver)
-        return np.array(y)
 
 
 def _decrement(r, J, s2):
@@ -620,15 +615,20 @@ def fit_traces(
     outcomes = _OPTIMISERS[method](evaluate, x0s, n_samples, max_iter=max_iter, tol=tol,
                                    progress=report)
     xs = [o.x for o in outcomes]
-    model = evaluate.predict(xs)
-    model[np.asarray(data.weight) == 0] = 0.0
-    errors = _solver_error(evaluate, xs, model, traces, scales, spec, settings, groups) if (
+    # The model at the optimum from its residuals (r = w (y - y_data)/σ): no separate prediction
+    # function to trace, lower and load from the compilation cache.
+    n_pad = data.weight.shape[1]
+    r_all = np.zeros((len(traces), n_pad))
+    for k, members in enumerate(groups):
+        for j, t in enumerate(members):
+            r_all[t] = outcomes[k].r[j * n_pad : (j + 1) * n_pad]
+    model = np.asarray(data.response) + r_all * np.asarray(data.noise)[:, None]
+    errors = _solver_error(evaluate, xs, r_all, traces, scales, spec, settings, groups) if (
         model_error) else None
     wall = (time.perf_counter() - t0) / len(traces)
     results = []
     for k, members in enumerate(groups):
         o = outcomes[k]
-        n_pad = data.weight.shape[1]
         summary = _stats.summarise(o.r, o.J, [(n_pad, traces[t].time.size) for t in members],
                                    layout.labels[k], noise=noise,
                                    solver_error=None if errors is None else errors[k])
@@ -644,13 +644,15 @@ def fit_trace(trace: Trace, **kwargs) -> FitResult:
     return fit_traces([trace], **kwargs)[0]
 
 
-def _solver_error(evaluate, xs, model, traces, scales, spec, settings, groups):
+def _solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, groups):
     """Signed error of the model response at the optimum, per problem in residual units.
 
     One extra run on the nested coarse mesh (every other node) at 8·rtol: the spatial error is
     second order (×4 at twice the spacing) and the global time error ∝ rtol^{2/3} (×4 at 8·rtol),
     so both grow by the same factor and y_coarse,8rtol - y ≈ 3 (error of y): the error is
-    (y_coarse,8rtol - y)/3, the estimate ``lubjax.relax`` makes in two runs, in one."""
+    (y_coarse,8rtol - y)/3, the estimate ``lubjax.relax`` makes in two runs, in one. In residual
+    units (r = w (y - y_data)/σ) that is (r_coarse,8rtol - r)/3; the run is the fit's own
+    residual function on the other solver."""
     settings = _model.FIT_SETTINGS if settings is None else settings
     mesh = settings.mesh().coarsened()
     tol = settings.tolerance()
@@ -659,9 +661,8 @@ def _solver_error(evaluate, xs, model, traces, scales, spec, settings, groups):
     data = _stack_traces(traces, scales, spec, mesh)
     theta = jnp.asarray(evaluate.thetas(xs))
     with single_threaded_blas():
-        y_loose = np.array(evaluate.pred(theta, data, loose)[0])
-    err = (y_loose - model) / 3.0
-    err = err * np.asarray(evaluate.data.weight) / np.asarray(evaluate.data.noise)[:, None]
+        r_loose = np.array(evaluate.rj(theta, data, loose)[0])
+    err = (r_loose - r_fit) / 3.0
     err[~np.isfinite(err)] = 0.0
     return [np.concatenate([err[t] for t in g]) for g in groups]
 
