@@ -1,51 +1,51 @@
-"""Fit E*, η and z0 to tribometer relaxation traces with the lubjax solver.
+"""Fit the lubjax soft-EHL model to tribometer traces: E*, η, z0 (and more) with honest errors.
 
 Public API (see the module docstrings for the maths):
 
 * :func:`read_trace`, :func:`parse_trace`, :func:`write_trace`, :func:`make_trace`, :class:`Trace`
   — the CSV format of ``data/README.md``;
-* :func:`fit_trace`, :func:`fit_traces` (batched), :func:`initial_guess`, :class:`FitResult`,
-  :class:`Start` — the least-squares fit (Levenberg–Marquardt by default, or optax L-BFGS);
+* :class:`ModelSpec` — what is fitted: the drive (prescribed travel, a spring, force control),
+  the substrate (half-space or layer, elastic or viscoelastic) and the offset;
+* :func:`fit_traces` (separate, joint with ``shared=``, batched), :func:`fit_trace`,
+  :func:`compare_models`, :func:`initial_guess`, :class:`FitResult`, :class:`Start`;
 * :func:`scales_from_trace`, :class:`Scales`, :func:`predict`, :func:`residuals`,
-  :func:`residuals_and_jacobian` — the model: SI parameters to force at the samples, forward-mode
-  Jacobian;
-* :func:`result_to_dict`, :func:`plot_fit` — JSON-ready summaries and the figure.
+  :func:`residuals_and_jacobian`, :func:`trace_data`, :func:`make_solver` — the model;
+* :func:`result_to_dict`, :func:`fit_report`, :func:`plot_fit` — reports and the figure.
 """
 
 import lubjax  # noqa: F401  (enables float64 in JAX)
 
 from ._cli import plot_fit, summary_line, write_table
-from ._fit import (
-    FitResult,
-    Start,
-    fit_trace,
-    fit_traces,
-    initial_guess,
-    noise_level,
-    result_to_dict,
-)
+from ._compare import compare_models
+from ._fit import FitResult, Start, fit_trace, fit_traces, initial_guess
 from ._io import Trace, format_trace, make_trace, parse_trace, read_trace, write_trace
 from ._model import (
     FIT_SETTINGS,
+    ModelSpec,
     Scales,
     Solver,
     TraceData,
     make_solver,
+    noise_level,
     predict,
     residuals,
     residuals_and_jacobian,
     scales_from_trace,
     trace_data,
 )
+from ._report import fit_report, result_to_dict
 
 __all__ = [
     "FIT_SETTINGS",
     "FitResult",
+    "ModelSpec",
     "Scales",
     "Solver",
     "Start",
     "Trace",
     "TraceData",
+    "compare_models",
+    "fit_report",
     "fit_trace",
     "fit_traces",
     "format_trace",

@@ -17,6 +17,8 @@ import os
 import sys
 import time
 
+import numpy as np
+
 from lubjax._files import (
     EXIT_EPILOG,
     EXIT_FAILED,
@@ -28,38 +30,44 @@ from lubjax._files import (
     check_distinct_inputs,
     check_outputs,
     plot_format,
+    positive_float,
     positive_int,
     prepare_outputs,
     run_cli,
     save_figure,
 )
 
-from ._fit import FitResult, fit_traces, result_to_dict
+from ._cache import enable_compilation_cache
+from ._compare import compare_models
+from ._fit import METHODS, FitResult, fit_traces
 from ._io import read_trace
+from ._model import DRIVES, LAYER_BASES, ModelSpec
+from ._report import fit_report, result_to_dict, short_value
 
 PROG = "lubjax-fit"
-
-
-def _fmt(value, err, unit, scale=1.0):
-    return f"{value / scale:.4g} ± {err / scale:.2g} {unit}"
+SHAREABLE = ("E_star", "viscosity", "z0", "stiffening", "relaxation_time")
 
 
 def summary_line(res: FitResult) -> str:
     status = "converged" if res.converged else "NOT CONVERGED"
     if not res.identifiable:
         status += ", NOT IDENTIFIABLE"
+    labels = {"E_star": "E*", "viscosity": "eta", "relaxation_time": "tau",
+              "stiffening": "E0/Einf"}
+    values = ", ".join(
+        f"{labels.get(n, n)} = {short_value(res, n)}" for n in res.spec.names if n != "offset"
+    )
+    unit = "N" if res.spec.response == "force" else "m"
     return (
-        f"{os.path.basename(res.name) or 'trace'}: "
-        f"E* = {_fmt(res.E_star, res.stderr['E_star'], 'MPa', 1e6)}, "
-        f"eta = {_fmt(res.viscosity, res.stderr['viscosity'], 'Pa s')}, "
-        f"z0 = {_fmt(res.z0, res.stderr['z0'], 'um', 1e-6)}; beta = {res.beta:.4g}, "
-        f"z0/dc = {res.z0_over_dc:.4g}, rms residual = {res.rms_residual:.3g} N; "
+        f"{os.path.basename(res.name) or 'trace'}: {values}; beta = {res.beta:.4g}, "
+        f"z0/dc = {res.z0_over_dc:.4g}, rms residual = {res.rms_residual:.3g} {unit}, "
+        f"reduced chi2 = {res.stats['reduced_chi2']:.3g}; "
         f"{status} ({res.n_iterations} iterations, {res.wall_s:.1f} s)"
     )
 
 
 def plot_fit(res: FitResult, path: str) -> None:
-    """Data and model, residuals, and the fitted values with their 1-σ errors.
+    """Data and model, residuals (with their autocorrelation), and the fit report.
 
     Written atomically in the format of ``path``'s extension (png, pdf, svg, ...)."""
     import matplotlib
@@ -67,52 +75,45 @@ def plot_fit(res: FitResult, path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig = plt.figure(figsize=(9, 7.5))
-    gs = fig.add_gridspec(3, 1, height_ratios=[3, 1.3, 1.1], hspace=0.35)
-    ax = fig.add_subplot(gs[0])
-    ax.plot(res.time, res.force * 1e3, ".", ms=2.5, color="0.55", label="data")
-    ax.plot(res.time, res.model * 1e3, "-", color="C3", lw=1.5, label="lubjax model (fit)")
-    ax.set_ylabel("force [mN]")
+    force = res.spec.response == "force"
+    scale, unit = (1e3, "mN") if force else (1e6, "μm")
+    label = "force" if force else "approach"
+    fig = plt.figure(figsize=(13, 8))
+    gs = fig.add_gridspec(3, 2, width_ratios=[1.55, 1], height_ratios=[3, 1.3, 1.2],
+                          hspace=0.35, wspace=0.08)
+    ax = fig.add_subplot(gs[0, 0])
+    ax.plot(res.time, res.data * scale, ".", ms=2.0, color="0.6", label="data")
+    ax.plot(res.time, res.model * scale, "-", color="C3", lw=1.4, label="lubjax model (fit)")
+    ax.set_ylabel(f"{label} [{unit}]")
     ax.set_title(os.path.basename(res.name) or "trace")
-    ax.legend(loc="upper right")
+    ax.legend(loc="best")
     ax.grid(alpha=0.3)
-    ax2 = fig.add_subplot(gs[1], sharex=ax)
-    resid = (res.force - res.model) * 1e3
-    ax2.plot(res.time, resid, ".", ms=2.5, color="C0")
+    ax2 = fig.add_subplot(gs[1, 0], sharex=ax)
+    resid = (res.data - res.model) * scale
+    ax2.plot(res.time, resid, ".", ms=2.0, color="C0")
     ax2.axhline(0.0, color="k", lw=0.8)
-    ax2.set_ylabel("data - model [mN]")
+    sigma = res.stats.get("noise_sigma", 0.0) * scale
+    for s in (-2 * sigma, 2 * sigma):
+        ax2.axhline(s, color="0.5", lw=0.6, ls="--")
+    ax2.set_ylabel(f"data - model [{unit}]")
     ax2.set_xlabel("time [s]")
     ax2.grid(alpha=0.3)
-    ax3 = fig.add_subplot(gs[2])
+    ax4 = fig.add_subplot(gs[2, 0])
+    r = resid - np.mean(resid)
+    lags = np.arange(1, min(60, r.size // 4))
+    acf = np.array([float(r[k:] @ r[: r.size - k]) for k in lags]) / max(float(r @ r), 1e-300)
+    ax4.bar(lags, acf, width=0.8, color="C0")
+    band = 2 / np.sqrt(r.size)
+    ax4.axhspan(-band, band, color="0.85", zorder=0, label="±2/√n (white noise)")
+    ax4.set_ylim(min(-3 * band, 1.1 * acf.min()), max(3 * band, 1.1 * acf.max()))
+    ax4.set_xlabel("lag [samples]")
+    ax4.set_ylabel("residual autocorr.")
+    ax4.legend(loc="upper right", fontsize=8)
+    ax4.grid(alpha=0.3)
+    ax3 = fig.add_subplot(gs[:, 1])
     ax3.axis("off")
-    se = res.stderr
-    lines = [
-        f"E* = {res.E_star / 1e6:.4g} ± {se['E_star'] / 1e6:.2g} MPa     "
-        f"η = {res.viscosity:.4g} ± {se['viscosity']:.2g} Pa·s     "
-        f"z0 = {res.z0 * 1e6:.4g} ± {se['z0'] * 1e6:.2g} μm",
-        f"β = {res.beta:.4g}    z0/dc = {res.z0_over_dc:.4g}    dc = {res.indent * 1e6:.4g} μm    "
-        f"v0 = {res.speed * 1e3:.4g} mm/s    R = {res.radius * 1e3:.4g} mm    "
-        f"offset = {res.offset * 1e3:.3g} ± {se['offset'] * 1e3:.2g} mN",
-        f"rms residual = {res.rms_residual * 1e3:.3g} mN    "
-        f"{'converged' if res.converged else 'NOT converged'}"
-        f"{'' if res.identifiable else ', NOT identifiable'}    {res.n_iterations} iterations"
-        f" ({res.method})",
-    ]
-    truth = []
-    for label, key, val, scale, unit in [
-        ("E*", "true_E_star_Pa", res.E_star, 1e6, "MPa"),
-        ("η", "true_viscosity_Pa_s", res.viscosity, 1.0, "Pa·s"),
-        ("z0", "true_z0_m", res.z0, 1e-6, "μm"),
-    ]:
-        try:
-            true = float(res.metadata[key])
-        except (KeyError, ValueError):
-            continue
-        truth.append(f"{label} true {true / scale:.4g} {unit} ({100 * (val / true - 1):+.2f} %)")
-    if truth:
-        lines.append("synthetic truth: " + ",  ".join(truth))
-    for i, text in enumerate(lines):
-        ax3.text(0.0, 1.0 - 0.27 * i, text, transform=ax3.transAxes, va="top", fontsize=9.5)
+    ax3.text(0.0, 1.0, fit_report(res), transform=ax3.transAxes, va="top", ha="left",
+             family="monospace", fontsize=6.8)
     try:
         save_figure(fig, path, dpi=120, bbox_inches="tight")
     finally:
@@ -140,54 +141,34 @@ def plot_paths(plot: str, traces) -> list[str]:
 
 
 def write_table(results, path: str) -> None:
-    """One CSV row per trace with the fitted values, errors and flags (written atomically)."""
-    cols = [
-        "trace",
-        "E_star_Pa",
-        "E_star_se",
-        "viscosity_Pa_s",
-        "viscosity_se",
-        "z0_m",
-        "z0_se",
-        "offset_N",
-        "beta",
-        "z0_over_dc",
-        "rms_residual_N",
-        "converged",
-        "identifiable",
-        "n_iterations",
-        "wall_s",
-    ]
+    """One CSV row per trace: fitted values, errors, statistics and flags (written atomically)."""
+    names = []
+    for r in results:
+        names += [n for n in r.spec.names if n not in names]
+    cols = ["trace", "drive", "substrate"]
+    for n in names:
+        cols += [n, f"{n}_se"]
+    cols += ["beta", "z0_over_dc", "rms_residual", "reduced_chi2", "noise_model", "converged",
+             "identifiable", "n_iterations", "wall_s"]
     with atomic_open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(cols)
         for r in results:
-            w.writerow(
-                [
-                    r.name,
-                    r.E_star,
-                    r.stderr["E_star"],
-                    r.viscosity,
-                    r.stderr["viscosity"],
-                    r.z0,
-                    r.stderr["z0"],
-                    r.offset,
-                    r.beta,
-                    r.z0_over_dc,
-                    r.rms_residual,
-                    r.converged,
-                    r.identifiable,
-                    r.n_iterations,
-                    r.wall_s,
-                ]
-            )
+            row = [r.name, r.spec.drive, r.spec.substrate_label()]
+            for n in names:
+                row += [r.values.get(n, ""), r.stderr.get(n, "")]
+            row += [r.beta, r.z0_over_dc, r.rms_residual, r.stats["reduced_chi2"],
+                    r.stats["noise_model"], r.converged, r.identifiable, r.n_iterations,
+                    r.wall_s]
+            w.writerow(row)
 
 
 def build_parser() -> Parser:
     p = Parser(
         prog=PROG,
-        description="Fit the substrate modulus E*, film viscosity eta and initial gap z0 to "
-        "relaxation traces (CSV: see data/README.md) with the lubjax soft-EHL solver.",
+        description="Fit the substrate modulus E*, film viscosity eta and initial gap z0 (and, "
+        "for a viscoelastic solid, E0/Einf and tau) to tribometer traces (CSV: see "
+        "data/README.md) with the lubjax soft-EHL solver.",
         epilog=EXIT_EPILOG.format(
             failed="a fit did not converge (its results are still written),\n"
             "     or an output could not be written"
@@ -198,31 +179,85 @@ def build_parser() -> Parser:
     p.add_argument("--table", help="also write a CSV table, one row per trace")
     p.add_argument(
         "--plot",
-        help="figure of data, model, residuals and values (.png, .pdf, .svg, ...; one per "
-        "trace: the trace name is appended when there are several)",
+        help="figure of data, model, residuals and the fit report (.png, .pdf, .svg, ...; one "
+        "per trace: the trace name is appended when there are several)",
     )
+    p.add_argument("--report", help="also write the text fit report(s) to this file")
     p.add_argument(
-        "--method",
-        choices=("lm", "lbfgs"),
-        default="lm",
-        help="optimiser: Levenberg-Marquardt (default) or optax L-BFGS",
+        "--drive", choices=DRIVES, default=None,
+        help="what the instrument prescribes: travel (position control; default), force (load "
+        "control: displacement is the response) or spring (travel through a load cell of "
+        "stiffness '# stiffness_N_m:'); default: the trace's '# drive:' header, else spring "
+        "when it gives a stiffness, else travel",
     )
-    p.add_argument("--no-offset", action="store_true", help="do not fit a constant force offset")
+    p.add_argument("--substrate", choices=("halfspace", "layer", "viscoelastic"),
+                   default="halfspace", help="elastic half-space (default), a layer of "
+                   "thickness --thickness on a rigid base, or a viscoelastic half-space (one "
+                   "Prony term: E0/Einf and tau fitted)")
+    p.add_argument("--thickness", type=positive_float, help="layer thickness H [m] (known)")
+    p.add_argument("--layer-base", choices=LAYER_BASES, default="bonded",
+                   help="layer on its rigid base: bonded (default) or frictionless")
+    p.add_argument("--layer-poisson", type=float, default=0.5,
+                   help="Poisson ratio of the layer (default 0.5)")
+    p.add_argument("--compare", action="store_true",
+                   help="also fit the richer viscoelastic model and report which one the data "
+                   "ask for (likelihood ratio, AIC, BIC)")
+    p.add_argument("--shared", help="joint fit: parameters shared by all traces, e.g. "
+                   "E_star,viscosity (the others, and the offsets, are fitted per trace)")
+    p.add_argument("--method", choices=METHODS, default="lm",
+                   help="optimiser: Levenberg-Marquardt (default), trf (scipy least_squares) "
+                   "or lbfgs (optax)")
+    p.add_argument("--noise", choices=("auto", "white", "ar1"), default="auto",
+                   help="noise model of the errors: auto (AR(1) when the residuals are not "
+                   "white; default), white, ar1")
+    p.add_argument("--no-offset", action="store_true", help="do not fit a constant offset")
     p.add_argument("--max-iter", type=positive_int, default=60, help="iteration limit (default 60)")
+    p.add_argument("--no-cache", action="store_true",
+                   help="do not use the persistent compilation cache (also LUBJAX_CACHE=0)")
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
     add_debug_flag(p)
     return p
 
 
+def _spec_options(args, n_traces):
+    """ModelSpec keyword arguments and shared names from the options (UsageError if bad)."""
+    if args.thickness is not None and args.substrate != "layer":
+        raise UsageError("--thickness: only with --substrate layer")
+    if args.substrate == "layer" and args.thickness is None:
+        raise UsageError("--substrate layer needs --thickness H (metres)")
+    if not -1.0 < args.layer_poisson <= 0.5:
+        raise UsageError(f"--layer-poisson must be in (-1, 0.5], got {args.layer_poisson:g}")
+    if args.compare and args.substrate == "viscoelastic":
+        raise UsageError("--compare fits the viscoelastic model itself: leave out --substrate "
+                         "viscoelastic")
+    shared = ()
+    if args.shared is not None:
+        shared = tuple(x.strip() for x in args.shared.split(",") if x.strip())
+        bad = [x for x in shared if x not in SHAREABLE]
+        if bad or not shared:
+            raise UsageError(f"--shared: unknown parameter(s) {', '.join(bad) or repr(args.shared)}"
+                             f" (allowed: {', '.join(SHAREABLE)})")
+        if n_traces < 2:
+            raise UsageError("--shared needs at least two traces (a joint fit)")
+        if any(x in ("stiffening", "relaxation_time") for x in shared) and (
+                args.substrate != "viscoelastic"):
+            raise UsageError("--shared stiffening/relaxation_time need --substrate viscoelastic")
+    layer = (args.thickness, args.layer_poisson, args.layer_base) if args.thickness else None
+    return dict(layer=layer, viscoelastic=args.substrate == "viscoelastic",
+                fit_offset=not args.no_offset), shared
+
+
 def _run(args) -> int:
     check_distinct_inputs(args.traces, "trace")
+    spec_kw, shared = _spec_options(args, len(args.traces))
     plots = []
     if args.plot is not None:
         if not args.plot.strip():
             raise UsageError("--plot: empty file name")
         plot_format(args.plot)  # before the per-trace names, so the message shows the user's
         plots = plot_paths(args.plot, args.traces)
-    outputs = [("--out", args.out), ("--table", args.table)] + [("--plot", p) for p in plots]
+    outputs = [("--out", args.out), ("--table", args.table), ("--report", args.report)] + [
+        ("--plot", p) for p in plots]
     check_outputs(outputs, inputs=args.traces, input_label="input trace")
     start = time.perf_counter()
     shown = False
@@ -235,17 +270,22 @@ def _run(args) -> int:
             sys.stderr.write(f"\r\033[K[{elapsed:6.1f} s] {msg}"[:200])
             sys.stderr.flush()
 
+    comparison = None
     try:
         traces = [read_trace(path) for path in args.traces]
+        spec = ModelSpec(drive=_common_drive(traces, args.drive), **spec_kw)
         prepare_outputs(outputs)  # creates missing folders: only once the inputs are good
+        if not args.no_cache:  # a repeated call loads the compiled solver instead of compiling
+            enable_compilation_cache()
         progress(f"read {len(traces)} trace(s); compiling the solver (first call only) ...")
-        results = fit_traces(
-            traces,
-            method=args.method,
-            fit_offset=not args.no_offset,
-            max_iter=args.max_iter,
-            progress=progress,
-        )
+        kw = dict(shared=shared, method=args.method, max_iter=args.max_iter, noise=args.noise,
+                  progress=progress)
+        if args.compare:
+            simple, rich, comparison = compare_models(traces, simple=spec, **kw)
+            use_rich = comparison["choice"] == comparison["rich"]
+            results, other = (rich, simple) if use_rich else (simple, rich)
+        else:
+            results, other = fit_traces(traces, spec=spec, **kw), None
     finally:
         if shown:  # clear the progress line: an error message or the summary follows
             sys.stderr.write("\r\033[K")
@@ -254,7 +294,13 @@ def _run(args) -> int:
         print(summary_line(res))
         for flag in res.flags[1:]:
             print(f"  warning: {flag}")
+    if comparison is not None:
+        print("model comparison: " + comparison["report"][-1])
     dicts = [result_to_dict(r) for r in results]
+    if other is not None:
+        for d, o in zip(dicts, other):
+            d["alternative"] = {k: v for k, v in result_to_dict(o).items()
+                                if k not in ("comparison", "metadata")}
     if args.out:
         with atomic_open(args.out, "w") as fh:
             json.dump(dicts[0] if len(dicts) == 1 else dicts, fh, indent=2)
@@ -262,10 +308,24 @@ def _run(args) -> int:
     if args.table:
         write_table(results, args.table)
         print(f"wrote {args.table}")
+    if args.report:
+        with atomic_open(args.report, "w") as fh:
+            fh.write("\n\n".join(fit_report(r) for r in results) + "\n")
+        print(f"wrote {args.report}")
     for res, path in zip(results, plots):
         plot_fit(res, path)
         print(f"wrote {path}")
     return EXIT_OK if all(r.converged for r in results) else EXIT_FAILED
+
+
+def _common_drive(traces, drive):
+    from ._model import drive_of
+
+    drives = {drive_of(t, drive) for t in traces}
+    if len(drives) > 1:
+        raise UsageError(f"the traces have different drives ({', '.join(sorted(drives))}): fit "
+                         "them in separate calls")
+    return drives.pop()
 
 
 def main(argv=None) -> int:

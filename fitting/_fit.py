@@ -1,88 +1,93 @@
-r"""Least-squares fit of (E*, η, z0) and a force offset to relaxation traces.
+r"""Least-squares fits of the lubjax model to traces: separate, joint and batched.
 
-Loss. With the residuals r(θ) of :mod:`fitting._model` (force misfit in units of the peak force
-F_u, θ = (ln E*, ln η, ln z0, b/F_u)), minimise S(θ) = ½ Σ_k r_k².
+Loss. With the residuals r(θ) of :mod:`fitting._model` (misfit in units of each trace's noise
+σ), minimise S = ½ Σ_k r_k², i.e. ½χ².
+
+Problems. A fit is a set of *problems*, each a parameter vector x and the traces it explains:
+trace t of problem k uses θ_t = θ_t⁰ + M_t x (M_t a 0/1 selection, θ_t⁰ the values held fixed).
+Separate fits are one problem per trace; a joint fit (``shared=``) is one problem whose x holds
+the shared parameters once and the other parameters once per trace. Every trace of every problem
+is evaluated in one ``vmap``-ed call, and each problem keeps its own optimiser state.
 
 Optimisers (``method=``):
 
-* ``"lm"`` (default): Levenberg–Marquardt on the forward-mode Jacobian J = ∂r/∂θ (``jax.jvp``
-  per parameter). Step (JᵀJ + λ diag JᵀJ) δ = -Jᵀr, accepted when S decreases (then λ ← λ/3,
-  else λ ← 4λ), with |δ_i| ≤ 1 (a factor e per step in E*, η, z0). A step whose run makes the
-  film negative or non-finite counts as rejected. Several traces are fitted together: one
-  ``vmap``-ed Jacobian call per iteration for the whole batch, each trace with its own λ.
-* ``"lbfgs"``: ``optax.lbfgs`` (zoom line search) on S. Its line search asks for
-  ``jax.value_and_grad``; S carries a ``custom_vjp`` whose forward pass computes ∇S = Jᵀr by
-  forward mode, so reverse mode never runs through the solver.
-
-Why LM is the default: the problem is a small (4-parameter) nonlinear least-squares problem
-whose Jacobian is needed anyway for the standard errors; Gauss–Newton uses the curvature JᵀJ,
-which is what makes the strongly correlated directions (E* with η through β, z0 with E* through
-the Hertz plateau) converge in a handful of steps. L-BFGS builds its curvature from gradients
-only and needs several times more solver runs (each line-search trial is a value+gradient)
-to reach the same tolerance. Measured on data/paper_dc126.csv (same start, same convergence test):
-LM 3 iterations / 7 model runs, 59 s; L-BFGS 25 iterations, 222 s (both with compilation, on a
-shared 2-core machine), same optimum to 4e-6 relative.
+* ``"lm"`` (default): Levenberg–Marquardt on the forward-mode Jacobian J = ∂r/∂x. Step
+  (JᵀJ + λ diag JᵀJ) δ = -Jᵀr, accepted when S decreases (then λ ← λ/3, else λ ← 4λ), with
+  |δ_i| ≤ 1 (a factor e per step in E*, η, z0). A step whose run makes the film negative or
+  non-finite counts as rejected. The Jacobian comes with the residuals at about the cost of one
+  run (the tangents reuse the step's factorisation), so every trial evaluates both: one model run
+  per iteration.
+* ``"trf"``: ``scipy.optimize.least_squares`` (trust-region reflective) on the same residuals
+  and Jacobian, one problem after another (benchmarks/fit_benchmark.py compares the two).
+* ``"lbfgs"``: ``optax.lbfgs`` on S with reverse-mode ``jax.grad`` (the stepper's checkpointed
+  scan), one problem after another.
 
 Convergence: the Gauss–Newton decrement gᵀ(JᵀJ)⁻¹g with g = Jᵀr, in units of the residual variance
-σ̂² = 2S/(n - p), below ``tol`` (1e-4): the remaining step is under 1 % of a standard error.
+s² = 2S/(n - p), below ``tol`` (1e-4): the remaining step is under 1 % of a standard error. An
+error-controlled model is smooth in θ only to its tolerance (the step choices change with θ), so
+the cost may stall first: stalled twice with the decrement below ``STALL_DECREMENT`` counts as
+converged, at the model's accuracy.
 
-Uncertainties at the optimum: Cov(θ) = σ̂² (JᵀJ)⁻¹; standard errors of E*, η, z0 by the delta
-method (SE(x) = x·SE(ln x)); correlations Cov_ij/(SE_i SE_j). A fit is flagged
-``identifiable=False`` if any |correlation| > 0.999 or the condition number of the correlation
-matrix exceeds 1e8. These errors assume independent noise and a correct model: the
-discretisation error of the model is not included (error-controlled at Settings.rtol = 1e-3).
+Uncertainties: :mod:`fitting._stats`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
 import time
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 
-from . import _model
+import lubjax
+from lubjax._threads import single_threaded_blas
+
+from . import _model, _stats
 from ._io import Trace
-from ._model import N_PARAMS, Scales, Solver, TraceData
+from ._model import ModelSpec, Scales
 
-MAX_CORRELATION = 0.999
 STALL_RTOL = 1e-7
 STALL_DECREMENT = 0.05
-MAX_CONDITION = 1e8
+METHODS = ("lm", "trf", "lbfgs")
 
 
 class Start(NamedTuple):
-    """Physics-based starting values [SI] and how they were obtained."""
+    """Starting values [SI] (keys: the spec's parameter names) and how they were found."""
 
-    E_star: float
-    viscosity: float
-    z0: float
-    offset: float
+    values: dict
     notes: tuple
+
+    def __getattr__(self, name):  # start.E_star, start.z0, ...
+        try:
+            return self.values[name]
+        except KeyError:
+            raise AttributeError(name) from None
 
 
 class FitResult(NamedTuple):
-    """One fitted trace. SI units; ``stderr`` maps E_star, viscosity, z0, offset to 1-σ errors."""
+    """One fitted trace. SI units throughout.
+
+    ``values``/``stderr`` map the parameter names of ``spec.names`` (E_star, viscosity, z0, then
+    stiffening = E0/E∞ and relaxation_time τ [s] for a viscoelastic solid, offset) to the fitted
+    value and its reported 1-σ error; ``shared`` names those fitted jointly with the other traces
+    of ``group``. ``stats`` holds the fit statistics and the parts of the error budget
+    (:func:`fitting._stats.summarise`)."""
 
     name: str
-    E_star: float
-    viscosity: float
-    z0: float
-    offset: float
+    spec: ModelSpec
+    values: dict
     stderr: dict
-    correlation: np.ndarray  # 4×4 (E*, η, z0, offset); offset row/col NaN if not fitted
-    beta: float
-    z0_over_dc: float
-    indent: float
-    speed: float
-    radius: float
-    rms_residual: float  # [N]
+    correlation: np.ndarray  # over spec.names; NaN rows/columns for parameters held fixed
+    shared: tuple
+    group: tuple
+    scales: Scales
+    stats: dict
     converged: bool
     identifiable: bool
-    condition: float
     n_iterations: int
     n_model_runs: int
     method: str
@@ -90,22 +95,24 @@ class FitResult(NamedTuple):
     start: Start
     flags: tuple
     time: np.ndarray  # sample times [s]
-    force: np.ndarray  # measured force [N]
-    model: np.ndarray  # fitted force at the samples [N]
+    data: np.ndarray  # measured response [N or m]
+    model: np.ndarray  # fitted response at the samples
     metadata: dict
+
+    E_star = property(lambda self: self.values["E_star"])
+    viscosity = property(lambda self: self.values["viscosity"])
+    z0 = property(lambda self: self.values["z0"])
+    offset = property(lambda self: self.values["offset"])
+    beta = property(lambda self: self.scales.beta(self.E_star, self.viscosity))
+    z0_over_dc = property(lambda self: self.z0 / self.scales.indent)
+    rms_residual = property(lambda self: self.stats["rms_residual"])
 
 
 # --------------------------------------------------------------------------- starting values
 
 
-def noise_level(force: np.ndarray) -> float:
-    """Robust noise σ from successive differences: 1.4826 · MAD(ΔF)/√2."""
-    df = np.diff(force)
-    return float(1.4826 * np.median(np.abs(df - np.median(df))) / math.sqrt(2.0))
-
-
-def initial_guess(trace: Trace, scales: Scales) -> Start:
-    r"""Starting values from the physics, not from the user.
+def _travel_guess(t, d, f, scales: Scales, notes: list) -> dict:
+    r"""Relaxation test (position control): Reynolds on the loading, then Hertz or t_R.
 
     1. Offset b0: median force over the quiescent samples (before t_on).
     2. Early loading, where the film is thick and the sphere is effectively rigid, follows
@@ -117,29 +124,23 @@ def initial_guess(trace: Trace, scales: Scales) -> Start:
        determined (> 0.2 d_c); otherwise E* comes from the relaxation time t_R = t_c/β: the
        time t½ after the force peak for it to fall halfway to its final value is
        t½ ≈ C·t_c/β, hence β and then E* = 6πηv0R^{3/2}β/d_c^{5/2}. C = ``RELAX_CONSTANT`` = 8
-       is the geometric mean over the noiseless traces of data/clean; it drifts from 4 to 14 as
+       is the geometric mean over the noiseless paper traces; it drifts from 4 to 14 as
        z̄0 goes from 1.1 to 0.9 (the late hold is limited by drainage of the trapped film, not
        by t_R alone), so this start is good to a factor ~2 — enough for Levenberg–Marquardt.
     """
-    t, d, f = trace.time, trace.displacement, trace.force
-    notes = []
     R, dc, v0, tc = scales.radius, scales.indent, scales.speed, scales.time_scale
     quiet = t < scales.t_on
     offset = float(np.median(f[quiet])) if np.count_nonzero(quiet) >= 3 else 0.0
     fc = f - offset
-    sigma = noise_level(f)
-    width = 5
-    smooth = np.convolve(fc, np.ones(width) / width, mode="same")
+    sigma = _model.noise_level(f)
+    smooth = np.convolve(fc, np.ones(5) / 5, mode="same")
     k_peak = int(np.argmax(smooth))
     f_peak = float(smooth[k_peak])
     v = np.gradient(d, t)
     idx = np.arange(t.size)
     sel = (
-        (t > scales.t_on)
-        & (idx < k_peak)
-        & (fc > max(0.05 * f_peak, 3 * sigma))
-        & (fc < 0.4 * f_peak)
-        & (v > 0.5 * v0)
+        (t > scales.t_on) & (idx < k_peak) & (fc > max(0.05 * f_peak, 3 * sigma))
+        & (fc < 0.4 * f_peak) & (v > 0.5 * v0)
     )
     z0 = eta = None
     if np.count_nonzero(sel) >= 3:
@@ -165,341 +166,476 @@ def initial_guess(trace: Trace, scales: Scales) -> Start:
         beta = RELAX_CONSTANT * tc / max(t_half, 1e-3 * tc)
         E_star = beta * 6 * math.pi * eta * v0 * R**1.5 / dc**2.5
         notes.append(f"E* from the relaxation time t_R = t_c/beta (t_half = {t_half:.3g} s)")
-    return Start(float(E_star), float(eta), float(z0), offset, tuple(notes))
+    return dict(E_star=float(E_star), viscosity=float(eta), z0=float(z0), offset=offset)
+
+
+def _creep_guess(t, load, d, scales: Scales, notes: list) -> dict:
+    r"""Creep (load control): Reynolds drainage, then Hertz.
+
+    1. Offset: median displacement over the quiescent samples.
+    2. While the film is thick the sphere is effectively rigid and Reynolds' F = 6πηR²(-ż)/z
+       integrates to z = z0 exp(-I(t)/(6πηR²)), I = ∫F dt: the approach d = z0(1 - e^{-aI}).
+       For each z0 on a grid, a (hence η) by least squares of ln(z0/(z0 - d)) = aI over the
+       samples with 5 % < d < 50 % of the final approach; the z0 with the smallest misfit of d.
+    3. E* from Hertz: the final approach d_end = z0 + δ, δ ≈ (3F/(4E*√R))^{2/3} (an undrained
+       film makes δ smaller, so this E* is high, typically by < 2×).
+    """
+    R = scales.radius
+    quiet = t < scales.t_on
+    offset = float(np.median(d[quiet])) if np.count_nonzero(quiet) >= 3 else 0.0
+    dc = d - offset
+    d_end = scales.indent
+    impulse = np.concatenate([[0.0], np.cumsum(0.5 * (load[1:] + load[:-1]) * np.diff(t))])
+    sel = (dc > 0.05 * d_end) & (dc < 0.5 * d_end) & (t > scales.t_on)
+    best = None
+    if np.count_nonzero(sel) >= 3:
+        for z0 in np.geomspace(0.55, 1.0, 40) * d_end:
+            if z0 <= np.max(dc[sel]):
+                continue
+            y = np.log(z0 / (z0 - dc[sel]))
+            a = float(y @ impulse[sel] / (impulse[sel] @ impulse[sel]))
+            if a <= 0:
+                continue
+            err = float(np.sum((dc[sel] - z0 * (1 - np.exp(-a * impulse[sel]))) ** 2))
+            if best is None or err < best[0]:
+                best = (err, z0, a)
+    if best is not None:
+        _, z0, a = best
+        eta = 1.0 / (6 * math.pi * R**2 * a)
+        notes.append(f"z0, eta from Reynolds drainage under the load on {np.count_nonzero(sel)}"
+                     " samples")
+    else:
+        z0, eta = 0.8 * d_end, 1.0
+        notes.append("Reynolds drainage fit failed: z0 = 0.8 of the final approach, eta = 1 Pa s")
+    delta = max(d_end - z0, 0.1 * d_end)
+    E_star = 3 * scales.input_end / (4 * math.sqrt(R) * delta**1.5)
+    notes.append("E* from Hertz with the final approach less z0")
+    return dict(E_star=float(E_star), viscosity=float(eta), z0=float(z0), offset=offset)
+
+
+def initial_guess(trace: Trace, scales: Scales, spec: ModelSpec | None = None) -> Start:
+    """Starting values from the physics, not from the user (see ``_travel_guess`` and
+    ``_creep_guess``). For a sphere on a spring the sphere's own travel, stage travel less F/k,
+    goes into the relaxation-test rules. A viscoelastic solid starts at E0/E∞ = 1.2 and τ = t_c
+    (:func:`compare_models` starts it from the elastic fit instead, at three τ)."""
+    spec = ModelSpec(drive=_model.drive_of(trace)) if spec is None else spec
+    notes: list[str] = []
+    if spec.drive == "force":
+        values = _creep_guess(trace.time, trace.force, trace.displacement, scales, notes)
+    else:
+        d = trace.displacement
+        if spec.drive == "spring":
+            d = d - trace.force / trace.meta_float("stiffness_N_m")
+            notes.append("sphere travel = stage travel - F/k")
+        values = _travel_guess(trace.time, d, trace.force, scales, notes)
+    if spec.viscoelastic:
+        values.update(stiffening=1.2, relaxation_time=scales.time_scale)
+        notes.append("E0/Einf = 1.2, tau = t_c")
+    if not spec.fit_offset:
+        values["offset"] = 0.0
+    return Start({n: values[n] for n in spec.names}, tuple(notes))
 
 
 #: t½ ≈ RELAX_CONSTANT · t_c/β (see :func:`initial_guess`).
 RELAX_CONSTANT = 8.0
 
 
-# --------------------------------------------------------------------------- statistics
+# --------------------------------------------------------------------------- problems
 
 
-def _covariance(r, J, active, n):
-    """σ̂², Cov(θ) over the active parameters (NaN elsewhere), condition of the correlation."""
-    p = int(np.count_nonzero(active))
-    s2 = float(r @ r) / max(n - p, 1)
-    Ja = J[:, active]
-    A = Ja.T @ Ja
-    cov = np.full((N_PARAMS, N_PARAMS), np.nan)
+class _Layout(NamedTuple):
+    """Where each trace's θ comes from: θ_t = base[t] + M[t] @ x of its problem."""
+
+    problem: np.ndarray  # (T,) problem index of each trace
+    base: np.ndarray  # (T, P)
+    M: list  # per trace (P, n_k)
+    labels: list  # per problem: parameter labels of x
+
+
+def _layout(groups, spec: ModelSpec, names_of_traces, theta0, shared) -> tuple[_Layout, list]:
+    """Parameter layout and starting x for problems ``groups`` (lists of trace indices)."""
+    P = len(spec.names)
+    active = spec.active
+    T = theta0.shape[0]
+    problem = np.zeros(T, int)
+    base = np.where(active, 0.0, theta0)
+    M = [None] * T
+    labels, x0s = [], []
+    for k, members in enumerate(groups):
+        sh = [i for i, n in enumerate(spec.names) if active[i] and n in shared and len(members) > 1]
+        own = [i for i in range(P) if active[i] and i not in sh]
+        n = len(sh) + len(own) * len(members)
+        lab = [spec.names[i] for i in sh]
+        x0 = [float(np.mean(theta0[members, i])) for i in sh]
+        for j, t in enumerate(members):
+            problem[t] = k
+            m = np.zeros((P, n))
+            for a, i in enumerate(sh):
+                m[i, a] = 1.0
+            for a, i in enumerate(own):
+                m[i, len(sh) + j * len(own) + a] = 1.0
+            M[t] = m
+            suffix = f"[{names_of_traces[t]}]" if len(members) > 1 else ""
+            lab += [spec.names[i] + suffix for i in own]
+            x0 += [float(theta0[t, i]) for i in own]
+        labels.append(lab)
+        x0s.append(np.array(x0))
+    return _Layout(problem, base, M, labels), x0s
+
+
+class _Evaluator:
+    """(r, J, film) of every problem at given x, in one vmap-ed call over all traces."""
+
+    def __init__(self, data, solver, spec, layout: _Layout, groups):
+        self.data, self.solver, self.spec = data, solver, spec
+        self.layout, self.groups = layout, groups
+        self.rj = _model.batched_functions(spec)[0]
+        self.runs = 0
+
+    def thetas(self, xs):
+        lay = self.layout
+        return np.stack([lay.base[t] + lay.M[t] @ xs[lay.problem[t]] for t in range(len(lay.M))])
+
+    def __call__(self, xs):
+        theta = self.thetas(xs)
+        with single_threaded_blas():
+            r, J, film = self.rj(jnp.asarray(theta), self.data, self.solver)
+            r, J, film = np.asarray(r), np.asarray(J), np.asarray(film)
+        self.runs += 1
+        out = []
+        for members in self.groups:
+            rk = np.concatenate([r[t] for t in members])
+            Jk = np.concatenate([J[t] @ self.layout.M[t] for t in members])
+            ok = bool(np.isfinite(rk).all() and np.isfinite(Jk).all() and all(
+                film[t] > 0 for t in members))
+            out.append((rk, Jk, ok))
+        return out
+
+
+def _decrement(r, J, s2):
+    """Gauss–Newton decrement gᵀ(JᵀJ)⁻¹g / s²."""
+    g = J.T @ r
     try:
-        inv = np.linalg.inv(A)
-    except np.linalg.LinAlgError:
-        return s2, cov, math.inf
-    cov[np.ix_(active, active)] = s2 * inv
-    dg = np.sqrt(np.diag(A))
-    corr_a = A / np.outer(dg, dg)
-    cond = float(np.linalg.cond(corr_a))
-    return s2, cov, cond
-
-
-def _decrement(r, J, active, s2):
-    """Gauss–Newton decrement gᵀ(JᵀJ)⁻¹g / σ̂²."""
-    Ja = J[:, active]
-    g = Ja.T @ r
-    try:
-        step = np.linalg.solve(Ja.T @ Ja, g)
+        step = np.linalg.lstsq(J.T @ J, g, rcond=None)[0]
     except np.linalg.LinAlgError:
         return math.inf
     return float(g @ step) / max(s2, 1e-300)
 
 
+class _Outcome(NamedTuple):
+    x: np.ndarray
+    r: np.ndarray
+    J: np.ndarray
+    iterations: int
+    converged: bool
+    message: str
+
+
 # --------------------------------------------------------------------------- Levenberg–Marquardt
 
 
-def _lm_batch(theta0, data, solver, active, n_samples, *, max_iter, tol, progress=None):
-    """Batched LM. theta0 (B, 4); returns θ, r, J, iterations, converged, runs, messages."""
-    res_fn, rj_fn, _ = _model.batched_functions()
-    theta = np.array(theta0, dtype=np.float64)
-    B = theta.shape[0]
-    lam = np.full(B, 1e-3)
-    done = np.zeros(B, bool)
-    conv = np.zeros(B, bool)
-    iters = np.zeros(B, int)
-    runs = 0
-    msgs = [""] * B
-    stall = np.zeros(B, int)
+def _lm(evaluate: _Evaluator, x0s, n_samples, *, max_iter, tol, progress=None):
+    """Levenberg–Marquardt for every problem at once (one model run per iteration)."""
+    K = len(x0s)
+    xs = [x.copy() for x in x0s]
+    lam = np.full(K, 1e-3)
+    done = np.zeros(K, bool)
+    conv = np.zeros(K, bool)
+    iters = np.zeros(K, int)
+    stall = np.zeros(K, int)
+    msgs = [""] * K
+    cur = evaluate(xs)
+    cost = np.array([0.5 * float(rk @ rk) if ok else np.inf for rk, _, ok in cur])
+    for k, (_, _, ok) in enumerate(cur):
+        if not ok:
+            done[k] = True
+            msgs[k] = "the model run at the starting values failed (negative film or NaN)"
 
-    def evaluate_rj(th):
-        r, J, film = rj_fn(jnp.asarray(th), data, solver)
-        return np.array(r), np.array(J), np.array(film)
+    def s2_of(k):
+        return 2 * cost[k] / max(n_samples[k] - xs[k].size, 1)
 
-    r, J, film = evaluate_rj(theta)
-    runs += 1
-    bad0 = ~np.isfinite(r).all(axis=1) | ~(film > 0)
-    for b in np.flatnonzero(bad0):
-        done[b] = True
-        msgs[b] = "the model run at the starting values failed (negative film or NaN)"
-    cost = 0.5 * np.sum(r**2, axis=1)
     for it in range(1, max_iter + 1):
-        if done.all():
-            break
-        trial = theta.copy()
-        pred = np.zeros(B)
-        for b in np.flatnonzero(~done):
-            Ja = J[b][:, active]
-            A = Ja.T @ Ja
-            g = Ja.T @ r[b]
-            s2 = 2 * cost[b] / max(n_samples[b] - Ja.shape[1], 1)
-            if _decrement(r[b], J[b], active, s2) < tol:
-                done[b], conv[b] = True, True
-                msgs[b] = "converged (Gauss-Newton decrement below tolerance)"
+        trial = [x.copy() for x in xs]
+        for k in np.flatnonzero(~done):
+            r, J, _ = cur[k]
+            if _decrement(r, J, s2_of(k)) < tol:
+                done[k], conv[k] = True, True
+                msgs[k] = "converged (Gauss-Newton decrement below tolerance)"
                 continue
-            M = A + lam[b] * np.diag(np.diag(A))
+            A = J.T @ J
+            g = J.T @ r
+            M = A + lam[k] * np.diag(np.diag(A))
             try:
                 delta = -np.linalg.solve(M, g)
             except np.linalg.LinAlgError:
                 delta = -g / (np.diag(M) + 1e-300)
-            scale = max(1.0, float(np.max(np.abs(delta))))
-            delta /= scale
-            trial[b, active] += delta
-            pred[b] = -(g @ delta) - 0.5 * delta @ A @ delta
-            iters[b] = it
+            delta /= max(1.0, float(np.max(np.abs(delta))))
+            trial[k] = xs[k] + delta
+            iters[k] = it
         if done.all():
             break
-        r_try, film_try = res_fn(jnp.asarray(trial), data, solver)
-        runs += 1
-        r_try, film_try = np.asarray(r_try), np.asarray(film_try)
-        ok = np.isfinite(r_try).all(axis=1) & (film_try > 0)
-        cost_try = np.where(
-            ok, 0.5 * np.sum(np.where(ok[:, None], r_try, 0.0) ** 2, axis=1), np.inf
-        )
-        accept = (~done) & (cost_try < cost)
-        # An error-controlled model is smooth in θ only to its tolerance (step choices change
-        # with θ), so near the optimum the cost stops decreasing before the Gauss-Newton
-        # decrement reaches ``tol``. Stalled twice with the remaining step below
-        # STALL_DECREMENT (in units of σ̂²) counts as converged, at the model's accuracy.
-        small = ~done & (~accept | (cost - cost_try < STALL_RTOL * cost))
-        stall = np.where(small, stall + 1, 0)
-        for b in np.flatnonzero(stall >= 2):
-            s2 = 2 * cost[b] / max(n_samples[b] - int(active.sum()), 1)
-            dec = _decrement(r[b], J[b], active, s2)
-            if dec < STALL_DECREMENT:
-                done[b], conv[b] = True, True
-                msgs[b] = (
-                    f"converged to the model's accuracy (cost stalled; Gauss-Newton decrement "
-                    f"{dec:.2g})"
-                )
-                accept[b] = False
-        for b in np.flatnonzero(~done & ~accept):
-            lam[b] *= 4.0
-            if lam[b] > 1e12:
-                done[b] = True
-                msgs[b] = "stopped: no decreasing step (lambda > 1e12)"
-        if accept.any():
-            theta[accept] = trial[accept]
-            lam[accept] = np.maximum(lam[accept] / 3.0, 1e-9)
-            r_new, J_new, film_new = evaluate_rj(theta)
-            runs += 1
-            r[accept], J[accept] = r_new[accept], J_new[accept]
-            cost[accept] = 0.5 * np.sum(r[accept] ** 2, axis=1)
+        new = evaluate(trial)
+        for k in np.flatnonzero(~done):
+            r_try, _, ok = new[k]
+            cost_try = 0.5 * float(r_try @ r_try) if ok else np.inf
+            accept = cost_try < cost[k]
+            small = (not accept) or (cost[k] - cost_try < STALL_RTOL * cost[k])
+            stall[k] = stall[k] + 1 if small else 0
+            if stall[k] >= 2:
+                dec = _decrement(cur[k][0], cur[k][1], s2_of(k))
+                if dec < STALL_DECREMENT:
+                    done[k], conv[k] = True, True
+                    msgs[k] = (f"converged to the model's accuracy (cost stalled; Gauss-Newton "
+                               f"decrement {dec:.2g})")
+                    continue
+            if accept:
+                xs[k], cur[k], cost[k] = trial[k], new[k], cost_try
+                lam[k] = max(lam[k] / 3.0, 1e-9)
+            else:
+                lam[k] *= 4.0
+                if lam[k] > 1e12:
+                    done[k] = True
+                    msgs[k] = "stopped: no decreasing step (lambda > 1e12)"
         if progress is not None:
             progress(it, cost, done)
-    for b in np.flatnonzero(~done):
-        msgs[b] = f"not converged after {max_iter} iterations"
-    # Final convergence test for the traces that stopped early for another reason.
-    for b in range(B):
-        if not conv[b] and np.isfinite(r[b]).all():
-            s2 = 2 * cost[b] / max(n_samples[b] - int(active.sum()), 1)
-            if _decrement(r[b], J[b], active, s2) < tol:
-                conv[b] = True
-                msgs[b] = "converged (Gauss-Newton decrement below tolerance)"
-    return theta, r, J, iters, conv, runs, msgs
+    out = []
+    for k in range(K):
+        r, J, _ = cur[k]
+        if not done[k]:
+            msgs[k] = f"not converged after {max_iter} iterations"
+        if not conv[k] and np.isfinite(r).all() and _decrement(r, J, s2_of(k)) < tol:
+            conv[k], msgs[k] = True, "converged (Gauss-Newton decrement below tolerance)"
+        out.append(_Outcome(xs[k], r, J, int(iters[k]), bool(conv[k]), msgs[k]))
+    return out
 
 
-# --------------------------------------------------------------------------- L-BFGS (optax)
+# --------------------------------------------------------------------------- scipy, optax
 
 
-def _make_loss(data: TraceData, solver: Solver, active_mask):
-    """S(θ) = ½|r|² with a custom VJP whose forward pass gets ∇S = Jᵀr by forward mode."""
+def _single(evaluate: _Evaluator, k, x0s):
+    """(r, J, ok) of problem k alone at x (the others held at their start)."""
+    xs = list(x0s)
 
-    def value_and_grad(theta):
-        r, J, film = _model.residuals_and_jacobian(theta, data, solver)
-        bad = ~(jnp.all(jnp.isfinite(r)) & (film > 0))
-        value = jnp.where(bad, jnp.inf, 0.5 * jnp.sum(r**2))
-        grad = jnp.where(bad, 0.0, (J.T @ r) * active_mask)
-        return value, grad
+    def at(x):
+        xs[k] = x
+        return evaluate(xs)[k]
 
-    @jax.custom_vjp
-    def loss(theta):
-        return value_and_grad(theta)[0]
-
-    def fwd(theta):
-        value, grad = value_and_grad(theta)
-        return value, grad
-
-    def bwd(grad, ct):
-        return (ct * grad,)
-
-    loss.defvjp(fwd, bwd)
-    return loss
+    return at
 
 
-def _lbfgs_single(theta0, data, solver, active, n_samples, *, max_iter, tol, progress=None):
-    active_mask = jnp.asarray(active, dtype=jnp.float64)
-    loss = _make_loss(data, solver, active_mask)
-    opt = optax.lbfgs()
-    vg = optax.value_and_grad_from_state(loss)
+def _trf(evaluate, x0s, n_samples, *, max_iter, tol, progress=None):
+    """scipy.optimize.least_squares (trust-region reflective) per problem, our Jacobian."""
+    from scipy.optimize import least_squares
 
-    @jax.jit
-    def one(params, state):
-        value, grad = vg(params, state=state)
-        updates, state = opt.update(grad, state, params, value=value, grad=grad, value_fn=loss)
-        return optax.apply_updates(params, updates), state, value
+    out = []
+    for k in range(len(x0s)):
+        at = _single(evaluate, k, x0s)
+        cache = {}
 
-    params = jnp.asarray(theta0)
-    state = opt.init(params)
-    _, rj_fn, _ = _model.batched_functions()
-    it = 0
-    conv = False
-    msg = f"not converged after {max_iter} iterations"
-    prev = np.inf
-    for it in range(1, max_iter + 1):
-        params, state, value = one(params, state)
-        value = float(value)
+        def fun(x, at=at, cache=cache):
+            key = x.tobytes()
+            if key not in cache:
+                cache.clear()
+                r, J, ok = at(x)
+                if not ok:  # a failed run: a large residual makes the trust region shrink
+                    r, J = np.full_like(r, 1e6), np.zeros_like(J)
+                cache[key] = (r, J)
+            return cache[key][0]
+
+        def jac(x, fun=fun, cache=cache):
+            fun(x)
+            return cache[x.tobytes()][1]
+
+        sol = least_squares(fun, x0s[k], jac=jac, method="trf", x_scale="jac",
+                            max_nfev=max_iter, ftol=1e-10, xtol=1e-10, gtol=1e-10)
+        r, J, ok = at(sol.x)
+        s2 = float(r @ r) / max(n_samples[k] - sol.x.size, 1)
+        dec = _decrement(r, J, s2) if ok else math.inf
+        conv = ok and dec < STALL_DECREMENT
+        msg = f"scipy least_squares: {sol.message} (Gauss-Newton decrement {dec:.2g})"
+        out.append(_Outcome(sol.x, r, J, int(sol.nfev), conv, msg))
         if progress is not None:
-            progress(it, np.array([value]), np.array([False]))
-        if not math.isfinite(value):
-            msg = "stopped: non-finite loss (negative film or NaN)"
-            break
-        if it % 5 == 0 or abs(prev - value) <= 1e-12 * abs(value):
-            r, J, _ = _model.residuals_and_jacobian(params, data, solver)
-            r, J = np.asarray(r), np.asarray(J)
-            s2 = float(r @ r) / max(n_samples - int(active.sum()), 1)
-            if _decrement(r, J, active, s2) < tol:
-                conv, msg = True, "converged (Gauss-Newton decrement below tolerance)"
+            progress(sol.nfev, np.array([sol.cost]), np.array([True]))
+    return out
+
+
+def _lbfgs(evaluate, x0s, n_samples, *, max_iter, tol, progress=None):
+    """optax L-BFGS per problem on S = ½|r|², gradient by reverse mode (jax.grad)."""
+    import optax
+
+    spec, solver, lay = evaluate.spec, evaluate.solver, evaluate.layout
+    out = []
+    for k, members in enumerate(evaluate.groups):
+        datas = [jax.tree_util.tree_map(lambda a, t=t: a[t], evaluate.data) for t in members]
+        base = [jnp.asarray(lay.base[t]) for t in members]
+        Ms = [jnp.asarray(lay.M[t]) for t in members]
+
+        def loss(x, datas=datas, base=base, Ms=Ms):
+            total = 0.0
+            for d, b, m in zip(datas, base, Ms):
+                y, film = _model.predict(b + m @ x, d, solver, spec, mode="reverse")
+                r = d.weight * (y - d.response) / d.noise
+                total = total + jnp.where(film > 0, 0.5 * jnp.sum(r**2), jnp.inf)
+            return total
+
+        opt = optax.lbfgs()
+        vg = optax.value_and_grad_from_state(loss)
+
+        @jax.jit
+        def one(x, state, vg=vg, opt=opt, loss=loss):
+            value, grad = vg(x, state=state)
+            updates, state = opt.update(grad, state, x, value=value, grad=grad, value_fn=loss)
+            return optax.apply_updates(x, updates), state, value
+
+        x = jnp.asarray(x0s[k])
+        state = opt.init(x)
+        at = _single(evaluate, k, x0s)
+        conv, msg, it = False, f"not converged after {max_iter} iterations", 0
+        for it in range(1, max_iter + 1):
+            with single_threaded_blas():
+                x, state, value = one(x, state)
+            if progress is not None:
+                progress(it, np.array([float(value)]), np.array([False]))
+            if not math.isfinite(float(value)):
+                msg = "stopped: non-finite loss (negative film or NaN)"
                 break
-        prev = value
-    r, J, _ = rj_fn(params[None], jax.tree_util.tree_map(lambda a: a[None], data), solver)
-    return np.asarray(params), np.asarray(r[0]), np.asarray(J[0]), it, conv, msg
+            if it % 5 == 0:
+                r, J, ok = at(np.asarray(x))
+                s2 = float(r @ r) / max(n_samples[k] - x.size, 1)
+                if ok and _decrement(r, J, s2) < STALL_DECREMENT:
+                    conv, msg = True, "converged (Gauss-Newton decrement below tolerance)"
+                    break
+        r, J, _ = at(np.asarray(x))
+        out.append(_Outcome(np.asarray(x), r, J, it, conv, msg))
+    return out
+
+
+_OPTIMISERS = {"lm": _lm, "trf": _trf, "lbfgs": _lbfgs}
 
 
 # --------------------------------------------------------------------------- public API
 
 
-def _check_method(method):
-    if method not in ("lm", "lbfgs"):
-        raise ValueError(f"method must be 'lm' (Levenberg-Marquardt) or 'lbfgs', got {method!r}")
+def _check_args(traces, method, max_iter, tol, starts):
+    if method not in METHODS:
+        raise ValueError(
+            f"method must be 'lm' (Levenberg-Marquardt), 'trf' (scipy least_squares) or "
+            f"'lbfgs' (optax), got {method!r}"
+        )
+    if not traces:
+        raise ValueError("traces must contain at least one trace")
+    if not (isinstance(max_iter, int) and not isinstance(max_iter, bool) and max_iter >= 1):
+        raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
+    if not (isinstance(tol, (int, float)) and tol > 0):
+        raise ValueError(f"tol must be > 0, got {tol!r}")
+    if starts is not None and len(starts) != len(traces):
+        raise ValueError(f"starts must have one entry per trace ({len(traces)}), got {len(starts)}")
+
+
+def _spec_for(traces, spec, drive, substrate_kw):
+    if spec is not None:
+        return spec
+    drives = {_model.drive_of(tr, drive) for tr in traces}
+    if len(drives) > 1:
+        raise ValueError(
+            f"traces fitted together must have one drive, got {', '.join(sorted(drives))}"
+        )
+    return ModelSpec(drive=drives.pop(), **substrate_kw)
 
 
 def fit_traces(
     traces: list[Trace],
     *,
-    method: str = "lm",
+    spec: ModelSpec | None = None,
+    drive: str | None = None,
+    layer=None,
+    viscoelastic: bool = False,
     fit_offset: bool = True,
+    shared=(),
+    method: str = "lm",
     settings=None,
     max_iter: int = 60,
     tol: float = 1e-4,
     starts: list[Start] | None = None,
+    noise: str = "auto",
+    model_error: bool = True,
     progress=None,
 ) -> list[FitResult]:
-    """Fit several traces, together: one vmap-ed model/Jacobian call per LM iteration for the
-    whole batch (each trace takes its own error-controlled steps, on one shared mesh).
+    """Fit traces: each on its own (default), or jointly with ``shared`` parameters.
+
+    Every trace is evaluated in one vmap-ed model/Jacobian call per iteration (each takes its own
+    error-controlled steps on one shared mesh).
 
     Args:
         traces: :class:`fitting.Trace` objects (``read_trace``).
-        method: "lm" (default, Levenberg–Marquardt) or "lbfgs" (optax L-BFGS).
-        fit_offset: also fit a constant force offset b (default True).
-        settings: ``lubjax.Settings`` of the model (tolerance and mesh; default
-            ``fitting.FIT_SETTINGS``, the solver's defaults).
-        max_iter: iteration limit; tol: convergence tolerance on the Gauss–Newton decrement/σ̂².
+        spec: a :class:`ModelSpec`; or build one from ``drive`` (None: each trace's header),
+            ``layer`` ((H [m], ν, "bonded" | "frictionless") or None), ``viscoelastic`` and
+            ``fit_offset``.
+        shared: parameter names fitted once for all traces (a joint fit), e.g.
+            ("E_star", "viscosity"); the others (z0, the offsets) are fitted per trace.
+        method: "lm" (default), "trf" (scipy least_squares) or "lbfgs" (optax).
+        settings: ``lubjax.Settings`` of the model (default ``fitting.FIT_SETTINGS``).
+        max_iter: iteration limit; tol: convergence tolerance on the Gauss–Newton decrement/s².
         starts: starting values per trace (default: :func:`initial_guess`).
+        noise: "auto" (white unless the residuals are not), "white" or "ar1": the noise model
+            of the covariance (:mod:`fitting._stats`).
+        model_error: fold the solver's estimated error into the errors (:mod:`fitting._stats`).
         progress: optional callable(message) for progress lines (the CLI prints them).
     """
-    _check_method(method)
-    if not traces:
-        raise ValueError("traces must contain at least one trace")
-    for name, v in [("max_iter", max_iter)]:
-        if not (isinstance(v, int) and v >= 1):
-            raise ValueError(f"{name} must be a positive integer, got {v!r}")
-    if not (isinstance(tol, (int, float)) and tol > 0):
-        raise ValueError(f"tol must be > 0, got {tol!r}")
-    if starts is not None and len(starts) != len(traces):
-        raise ValueError(f"starts must have one entry per trace ({len(traces)}), got {len(starts)}")
-    active = np.array([True, True, True, bool(fit_offset)])
-    scales = [_model.scales_from_trace(tr) for tr in traces]
-    starts = (
-        [initial_guess(tr, s) for tr, s in zip(traces, scales, strict=True)]
-        if starts is None
-        else starts
-    )
-    results: list[FitResult | None] = [None] * len(traces)
+    _check_args(traces, method, max_iter, tol, starts)
+    spec = _spec_for(traces, spec, drive,
+                     dict(layer=layer, viscoelastic=viscoelastic, fit_offset=fit_offset))
+    shared = tuple(shared)
+    unknown = [n for n in shared if n not in spec.names or n == "offset"]
+    if unknown:
+        allowed = ", ".join(n for n in spec.names if n != "offset")
+        raise ValueError(f"shared: unknown parameter(s) {', '.join(unknown)} (allowed: {allowed})")
+    if noise not in _stats.NOISE_MODELS:
+        raise ValueError(f"noise must be one of {', '.join(_stats.NOISE_MODELS)}, got {noise!r}")
+    scales = [_model.scales_from_trace(tr, spec.drive) for tr in traces]
+    if starts is None:
+        starts = [initial_guess(tr, s, spec) for tr, s in zip(traces, scales, strict=True)]
+    groups = [list(range(len(traces)))] if shared else [[t] for t in range(len(traces))]
+    t0 = time.perf_counter()
     solver = _model.make_solver(settings)
-    # All traces go in one batch: each takes its own steps, so they need not share a time grid.
-    for members in [list(range(len(traces)))]:
-        t0 = time.perf_counter()
-        n_pad = max(traces[i].time.size for i in members)
-        n_hist = max(_model.history_size(traces[i], scales[i]) for i in members)
-        datas = [_model.trace_data(traces[i], scales[i], n_pad, n_hist) for i in members]
-        n_samples = np.array([traces[i].time.size for i in members])
-        theta0 = np.array(
-            [
-                [
-                    math.log(starts[i].E_star),
-                    math.log(starts[i].viscosity),
-                    math.log(starts[i].z0),
-                    (starts[i].offset if fit_offset else 0.0) / scales[i].force_unit,
-                ]
-                for i in members
-            ]
-        )
+    mesh = (_model.FIT_SETTINGS if settings is None else settings).mesh()
+    data = _stack_traces(traces, scales, spec, mesh)
+    theta0 = np.array([[_model.to_theta(n, st.values[n], sc.response_unit) for n in spec.names]
+                       for st, sc in zip(starts, scales, strict=True)])
+    names = [_short_name(tr.name) for tr in traces]
+    layout, x0s = _layout(groups, spec, names, theta0, shared)
+    evaluate = _Evaluator(data, solver, spec, layout, groups)
+    n_samples = [sum(traces[t].time.size for t in g) for g in groups]
 
-        def report(it, cost, done, members=members):
-            if progress is not None:
-                names = ", ".join(traces[i].name or "trace" for i in members)
-                progress(
-                    f"{names}: iteration {it}, loss {float(np.max(cost)):.4g}, "
-                    f"{int(np.sum(done))}/{len(done)} done"
-                )
+    def report(it, cost, done):
+        if progress is not None:
+            progress(f"iteration {it}, chi2/2 {float(np.max(cost)):.6g}, "
+                     f"{int(np.sum(done))}/{len(done)} done")
 
-        if method == "lm":
-            data = _model.stack(datas)
-            theta, r, J, iters, conv, runs, msgs = _lm_batch(
-                theta0, data, solver, active, n_samples, max_iter=max_iter, tol=tol,
-                progress=report,
-            )
-        else:
-            out = [
-                _lbfgs_single(
-                    theta0[j],
-                    datas[j],
-                    solver,
-                    active,
-                    n_samples[j],
-                    max_iter=max_iter,
-                    tol=tol,
-                    progress=report,
-                )
-                for j in range(len(members))
-            ]
-            theta = np.stack([o[0] for o in out])
-            r = np.stack([o[1] for o in out])
-            J = np.stack([o[2] for o in out])
-            iters = np.array([o[3] for o in out])
-            conv = np.array([o[4] for o in out])
-            msgs = [o[5] for o in out]
-            runs = None
-        _, _, pred_fn = _model.batched_functions()
-        model, _ = pred_fn(jnp.asarray(theta), _model.stack(datas), solver)
-        model = np.asarray(model)
-        wall = (time.perf_counter() - t0) / len(members)
-        for j, i in enumerate(members):
-            results[i] = _summarise(
-                traces[i],
-                scales[i],
-                starts[i],
-                theta[j],
-                r[j],
-                J[j],
-                active,
-                int(iters[j]),
-                bool(conv[j]),
-                msgs[j],
-                runs if runs is not None else -1,
-                method,
-                wall,
-                model[j, : n_samples[j]],
-            )
+    outcomes = _OPTIMISERS[method](evaluate, x0s, n_samples, max_iter=max_iter, tol=tol,
+                                   progress=report)
+    xs = [o.x for o in outcomes]
+    # The model at the optimum from its residuals (r = w (y - y_data)/σ): no separate prediction
+    # function to trace, lower and load from the compilation cache.
+    n_pad = data.weight.shape[1]
+    r_all = np.zeros((len(traces), n_pad))
+    for k, members in enumerate(groups):
+        for j, t in enumerate(members):
+            r_all[t] = outcomes[k].r[j * n_pad : (j + 1) * n_pad]
+    model = np.asarray(data.response) + r_all * np.asarray(data.noise)[:, None]
+    errors = _solver_error(evaluate, xs, r_all, traces, scales, spec, settings, groups) if (
+        model_error) else None
+    wall = (time.perf_counter() - t0) / len(traces)
+    results = []
+    for k, members in enumerate(groups):
+        o = outcomes[k]
+        summary = _stats.summarise(o.r, o.J, [(n_pad, traces[t].time.size) for t in members],
+                                   layout.labels[k], noise=noise,
+                                   solver_error=None if errors is None else errors[k])
+        for j, t in enumerate(members):
+            results.append(_trace_result(traces[t], spec, scales[t], starts[t], layout, t, o,
+                                         summary, j, members, names, shared, method,
+                                         evaluate.runs, wall, model[t, : traces[t].time.size]))
     return results
 
 
@@ -508,123 +644,94 @@ def fit_trace(trace: Trace, **kwargs) -> FitResult:
     return fit_traces([trace], **kwargs)[0]
 
 
-def _summarise(
-    trace, scales, start, theta, r, J, active, iters, conv, msg, runs, method, wall, model
-) -> FitResult:
+def _solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, groups):
+    """Signed error of the model response at the optimum, per problem in residual units.
+
+    One extra run on the nested coarse mesh (every other node) at 8·rtol: the spatial error is
+    second order (×4 at twice the spacing) and the global time error ∝ rtol^{2/3} (×4 at 8·rtol),
+    so both grow by the same factor and y_coarse,8rtol - y ≈ 3 (error of y): the error is
+    (y_coarse,8rtol - y)/3, the estimate ``lubjax.relax`` makes in two runs, in one. In residual
+    units (r = w (y - y_data)/σ) that is (r_coarse,8rtol - r)/3; the run is the fit's own
+    residual function on the other solver."""
+    settings = _model.FIT_SETTINGS if settings is None else settings
+    mesh = settings.mesh().coarsened()
+    tol = settings.tolerance()
+    loose = _model.Solver(lubjax.discretise(mesh), dataclasses.replace(tol, rtol=min(8 * tol.rtol,
+                                                                                       0.1)))
+    data = _stack_traces(traces, scales, spec, mesh)
+    theta = jnp.asarray(evaluate.thetas(xs))
+    with single_threaded_blas():
+        r_loose = np.array(evaluate.rj(theta, data, loose)[0])
+    err = (r_loose - r_fit) / 3.0
+    err[~np.isfinite(err)] = 0.0
+    return [np.concatenate([err[t] for t in g]) for g in groups]
+
+
+def _short_name(path):
+    return os.path.splitext(os.path.basename(path))[0] or "trace"
+
+
+def _stack_traces(traces, scales, spec, mesh):
+    n_pad = max(tr.time.size for tr in traces)
+    n_hist = max(_model.history_size(tr, s) for tr, s in zip(traces, scales, strict=True))
+    return _model.stack([_model.trace_data(tr, s, spec, mesh, n_pad, n_hist)
+                         for tr, s in zip(traces, scales, strict=True)])
+
+
+def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, members, names,
+                  shared, method, runs, wall, model) -> FitResult:
+    """Map a problem's x, covariance and statistics onto trace t's parameters (SI)."""
+    M = layout.M[t]
+    theta = layout.base[t] + M @ outcome.x
+    values, stderr, deriv = {}, {}, np.zeros(len(spec.names))
+    for i, n in enumerate(spec.names):
+        values[n], deriv[i] = _model.to_physical(n, float(theta[i]), scales.response_unit)
+    cov_theta = M @ summary["covariance"] @ M.T
+    active = spec.active
+    cov_theta[~active, :] = np.nan
+    cov_theta[:, ~active] = np.nan
+    for i, n in enumerate(spec.names):
+        stderr[n] = float(abs(deriv[i]) * math.sqrt(cov_theta[i, i])) if active[i] else 0.0
+    se = np.sqrt(np.diag(cov_theta))
+    corr = cov_theta / np.outer(se, se)
+    parts = {}
+    for part, cov in summary["parts"].items():
+        c = M @ cov @ M.T
+        parts[part] = {n: float(abs(deriv[i]) * math.sqrt(max(c[i, i], 0.0)))
+                       for i, n in enumerate(spec.names) if active[i]}
     n = trace.time.size
-    s2, cov, cond = _covariance(r[:n], J[:n], active, n)
-    fu = scales.force_unit
-    se_log = np.sqrt(np.diag(cov))
-    E, eta, z0 = (math.exp(x) for x in theta[:3])
-    stderr = {
-        "E_star": E * se_log[0],
-        "viscosity": eta * se_log[1],
-        "z0": z0 * se_log[2],
-        "offset": fu * se_log[3] if active[3] else 0.0,
-    }
-    corr = cov / np.outer(se_log, se_log)
-    flags = [msg]
-    off = np.abs(corr[np.ix_(active, active)] - np.eye(int(active.sum())))
-    identifiable = bool(np.nanmax(off) <= MAX_CORRELATION and cond <= MAX_CONDITION)
+    first = sum(length for length, _ in summary["sizes"][:j])
+    r_t = outcome.r[first : first + n]
+    stats = dict(summary["stats"])
+    stats.update(
+        rms_residual=float(np.sqrt(np.mean((model - _channel(trace, spec)) ** 2))),
+        autocorrelation_lag1_trace=float(_stats.lag1(r_t)),
+        error_parts=parts,
+        noise_sigma=float(_model.noise_level(_channel(trace, spec))),
+        condition=summary["condition"],
+        max_correlation=summary["max_correlation"],
+    )
+    flags = [outcome.message]
+    identifiable = bool(summary["max_correlation"] <= _stats.MAX_CORRELATION
+                        and summary["condition"] <= _stats.MAX_CONDITION)
     if not identifiable:
         flags.append(
-            f"parameters not identifiable: max |correlation| = {np.nanmax(off):.6f}, "
-            f"condition number {cond:.3g}"
+            f"parameters not identifiable: max |correlation| = {summary['max_correlation']:.6f}, "
+            f"condition number {summary['condition']:.3g}"
         )
-    if not conv:
+    if not outcome.converged:
         flags.append("fit did not converge: treat the values and errors as unreliable")
+    flags += summary["flags"]
     return FitResult(
-        name=trace.name,
-        E_star=E,
-        viscosity=eta,
-        z0=z0,
-        offset=float(theta[3] * fu),
-        stderr={k: float(v) for k, v in stderr.items()},
-        correlation=corr,
-        beta=float(scales.beta(E, eta)),
-        z0_over_dc=z0 / scales.indent,
-        indent=scales.indent,
-        speed=scales.speed,
-        radius=scales.radius,
-        rms_residual=float(fu * math.sqrt(np.mean(r[:n] ** 2))),
-        converged=conv,
-        identifiable=identifiable,
-        condition=cond,
-        n_iterations=iters,
-        n_model_runs=runs,
-        method=method,
-        wall_s=wall,
-        start=start,
-        flags=tuple(flags),
-        time=trace.time,
-        force=trace.force,
-        model=model,
-        metadata=dict(trace.metadata),
+        name=trace.name, spec=spec, values=values, stderr=stderr, correlation=corr,
+        shared=tuple(s for s in shared if len(members) > 1),
+        group=tuple(names[m] for m in members) if len(members) > 1 else (),
+        scales=scales, stats=stats, converged=outcome.converged, identifiable=identifiable,
+        n_iterations=outcome.iterations, n_model_runs=runs, method=method, wall_s=wall,
+        start=start, flags=tuple(flags), time=trace.time, data=_channel(trace, spec),
+        model=model, metadata=dict(trace.metadata),
     )
 
 
-def result_to_dict(res: FitResult) -> dict:
-    """A JSON-ready summary of a fit (SI units; keys as documented in data/README.md)."""
-    nu = None
-    try:
-        nu = float(res.metadata.get("poisson_ratio"))
-    except (TypeError, ValueError):
-        nu = None
-    out = {
-        "trace": res.name,
-        "E_star_Pa": res.E_star,
-        "viscosity_Pa_s": res.viscosity,
-        "z0_m": res.z0,
-        "offset_N": res.offset,
-        "stderr": {
-            "E_star_Pa": res.stderr["E_star"],
-            "viscosity_Pa_s": res.stderr["viscosity"],
-            "z0_m": res.stderr["z0"],
-            "offset_N": res.stderr["offset"],
-        },
-        "correlation": {
-            "names": ["E_star", "viscosity", "z0", "offset"],
-            "matrix": [
-                [None if not np.isfinite(x) else float(x) for x in row] for row in res.correlation
-            ],
-        },
-        "beta": res.beta,
-        "z0_over_dc": res.z0_over_dc,
-        "indent_m": res.indent,
-        "speed_m_s": res.speed,
-        "radius_m": res.radius,
-        "rms_residual_N": res.rms_residual,
-        "converged": res.converged,
-        "identifiable": res.identifiable,
-        "condition_number": res.condition,
-        "n_iterations": res.n_iterations,
-        "n_model_runs": res.n_model_runs,
-        "method": res.method,
-        "wall_s": res.wall_s,
-        "flags": list(res.flags),
-        "start": {
-            "E_star_Pa": res.start.E_star,
-            "viscosity_Pa_s": res.start.viscosity,
-            "z0_m": res.start.z0,
-            "offset_N": res.start.offset,
-            "notes": list(res.start.notes),
-        },
-        "metadata": dict(res.metadata),
-    }
-    if nu is not None and -1 < nu <= 0.5:
-        out["E_Pa"] = res.E_star * (1 - nu**2)
-        out["stderr"]["E_Pa"] = res.stderr["E_star"] * (1 - nu**2)
-    truth = {}
-    for key, meta_key, value in [
-        ("E_star_Pa", "true_E_star_Pa", res.E_star),
-        ("viscosity_Pa_s", "true_viscosity_Pa_s", res.viscosity),
-        ("z0_m", "true_z0_m", res.z0),
-    ]:
-        try:
-            true = float(res.metadata[meta_key])
-        except (KeyError, TypeError, ValueError):
-            continue
-        truth[key] = {"true": true, "relative_error": value / true - 1}
-    if truth:
-        out["vs_true"] = truth
-    return out
+def _channel(trace, spec):
+    return trace.displacement if spec.drive == "force" else trace.force

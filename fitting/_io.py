@@ -4,6 +4,8 @@ A trace file is plain UTF-8 text (a leading byte-order mark is accepted)::
 
     # radius_m: 2.0e-3          <- required: sphere (or reduced, eq 24) radius R [m]
     # poisson_ratio: 0.5        <- optional; any other "# key: value" line is kept as metadata
+    # drive: force              <- optional: travel (default), spring, force (load control)
+    # stiffness_N_m: 5000       <- optional: the load cell's stiffness (then drive spring)
     time_s,displacement_m,force_N
     0.0,0.0,0.0012
     ...
@@ -110,6 +112,30 @@ def _poisson(value, where: str) -> float:
     return nu
 
 
+#: Values of the ``# drive:`` header key (fitting._model.DRIVES).
+DRIVE_VALUES = ("travel", "spring", "force")
+
+
+def _check_model_keys(metadata: dict, where) -> None:
+    """``drive`` one of DRIVE_VALUES and ``stiffness_N_m`` a positive number; ``where(key)``
+    names the place (file and line)."""
+    if "drive" in metadata and metadata["drive"] not in DRIVE_VALUES:
+        raise TraceError(
+            f"{where('drive')}: drive must be one of {', '.join(DRIVE_VALUES)} (force: load "
+            f"control, the displacement is the response), got {metadata['drive']!r}"
+        )
+    if "stiffness_N_m" in metadata:
+        try:
+            k = float(metadata["stiffness_N_m"])
+        except (TypeError, ValueError):
+            k = math.nan
+        if not (math.isfinite(k) and k > 0):
+            raise TraceError(
+                f"{where('stiffness_N_m')}: stiffness_N_m (the instrument's load-cell "
+                f"stiffness) must be a finite number > 0 in N/m, got {metadata['stiffness_N_m']!r}"
+            )
+
+
 def check_scales(trace: Trace) -> None:
     """TraceError unless the trace's scales fit the thin-film model (see module docstring).
 
@@ -168,6 +194,7 @@ def make_trace(time, displacement, force, radius, metadata=None, name: str = "")
     r = _positive_radius(radius, label)
     if "poisson_ratio" in meta:
         _poisson(meta["poisson_ratio"], label)
+    _check_model_keys(meta, lambda key: label)
     meta.setdefault("radius_m", repr(r))
     trace = Trace(t, d, f, r, meta, name)
     check_scales(trace)
@@ -234,6 +261,7 @@ def _read_header(lines, name: str) -> _Header:
         radius = _positive_radius(metadata["radius_m"], f"{name}: line {meta_line['radius_m']}")
         if "poisson_ratio" in metadata:
             _poisson(metadata["poisson_ratio"], f"{name}: line {meta_line['poisson_ratio']}")
+        _check_model_keys(metadata, lambda key: f"{name}: line {meta_line[key]}")
         return _Header(metadata, radius, cells, lineno)
     raise TraceError(f"{name}: no header row (expected {','.join(COLUMNS)})")
 

@@ -1,33 +1,55 @@
-r"""From SI parameters to the force at the sample times of a trace, and its Jacobian.
+r"""From SI parameters to the measured response at the sample times of a trace, and its Jacobian.
 
-Scales taken from the data (not from the user):
+One model for every experiment: a **drive** (what the instrument prescribes) and a **substrate**
+(what the sphere presses into) go to the same error-controlled ``lubjax.rollout``:
 
-* d_c = final travel (median of the last 5 % of the displacement column),
-* v0 = median speed Δd/Δt over the samples with 0.2 d_c < d < 0.8 d_c (the ramp),
-* t_on = last quiescent sample before the travel first exceeds 10⁻³ d_c; t̄ = (t - t_on)/t_c with
-  t_c = d_c/v0.
+* ``"travel"`` (position control): input ``displacement_m``, response ``force_N``,
+  ``lubjax.Travel(d̄(t̄))``;
+* ``"spring"`` (position control through a load cell of stiffness k): input
+  ``displacement_m`` (the stage), response ``force_N``, ``lubjax.Spring(K̄, d̄(t̄))``;
+* ``"force"`` (load control, creep): input ``force_N``, response ``displacement_m``,
+  ``lubjax.Load(F̄_end, F(t̄)/F_end)``.
 
-The measured travel d(t)/d_c (not an ideal ramp) is the solver's history, linearly interpolated
-wherever the stepper needs it. With θ = (ln E*, ln η, ln z0, b/F_u) the model of sample k is
+Substrates: the half-space (default), a layer of known thickness H on a rigid base
+(``ModelSpec.layer``), and either of them viscoelastic (``ModelSpec.viscoelastic``: a standard
+linear solid, ``lubjax.Viscoelastic.standard_linear_solid``, whose E0/E∞ and τ are fitted; E*
+is then the relaxed modulus E*∞).
 
-    F_k(θ) = (2 E* d_c^{3/2} √R / π) · F̄(t̄_k; β, z̄0) + b,
-    β = E* d_c^{5/2} / (6π η v0 R^{3/2}),   z̄0 = z0/d_c                      (paper eqs 8e, 11b)
+Scales taken from the data (not from the user), for the input channel u(t) (travel or load):
 
-where F̄ is the error-controlled ``lubjax.rollout`` read at t̄_k by the stepper's own interpolant
-(F̄ = 0 before the motion starts; the steps do not depend on the sample times, so thousands of
-samples cost no extra steps), b a constant load-cell offset and F_u a force unit
-(the peak measured force) that keeps θ of order one. Residuals are r_k = w_k (F_k(θ) - F_k^data)/F_u
-with w_k ∈ {0, 1} (0 pads traces of different lengths to a common shape so that several traces
-``vmap`` together).
+* u_end = final input (median of the last 5 %), onset t_on = the last sample at rest
+  (``lubjax._indenter.motion_start``: exactly still, else below 10⁻³ u_end), rate = median
+  du/dt over the samples with 0.2 u_end < u < 0.8 u_end (the ramp),
+  t_c = u_end/rate, end of the ramp = first sample after the last one off u_end by 10⁻³ u_end;
+* d_c = final travel (travel, spring) or final approach (force control: the median of the last
+  5 % of the displacement); t̄ = (t - t_on)/t_c.
 
-The Jacobian ∂r/∂θ is taken in forward mode (one ``jax.jvp`` per parameter, ``vmap``-ed) through
-the stepper's ``while_loop``: the tangents ride along, so memory does not grow with the number of
-steps, and the loop stops when the slowest trace of a batch is done. Time accuracy is decided by
-the same controller as every other run (``Settings.rtol``), not by a private grid.
+With the speed d_c/t_c in eq 8e, β = E* d_c^{3/2} t_c/(6π η R^{3/2}) and z̄0 = z0/d_c for every
+drive (the creep test of ``lubjax.CreepTest`` uses the same β with its own d_c). The measured
+input u(t)/u_end (not an ideal ramp) is the solver's history, monotone-cubic interpolated
+wherever the stepper needs it. The model of sample k is
+
+    force response:         y_k = (2 E* d_c^{3/2} √R / π) · F̄(t̄_k) + b      (eq 11b)
+    displacement response:  y_k = d_c (z̄0 - z̄(t̄_k)) + b                  (approach since rest)
+
+with F̄ and z̄ the rollout read at t̄_k by the stepper's own interpolant (the steps do not depend
+on the sample times), b a constant offset of the response channel. The drive's numbers follow
+from E*: K̄ = π k/(2E*√(R d_c)) and the load F̄_end = F_end/F_s(E*), F_s = 2E* d_c^{3/2}√R/π.
+
+Parameters θ (all of order one or logarithms): ln E*, ln η, ln z0, [ln(E0/E∞ - 1), ln τ], b/y_u
+(y_u: the peak of the response). Residuals r_k = w_k (y_k(θ) - y_k^data)/σ with w_k ∈ {0, 1}
+(0 pads traces of different lengths to a common shape so that they ``vmap`` together) and σ the
+trace's noise level (:func:`noise_level`), so that Σr² is a χ² and traces of different noise
+weigh correctly in a joint fit.
+
+The Jacobian ∂r/∂θ is taken in forward mode (one ``jax.jvp`` per parameter, ``vmap``-ed)
+through the stepper's ``while_loop``: the tangents ride along with the factorisation, so the
+Jacobian costs about one run, and memory does not grow with the number of steps.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from typing import NamedTuple
@@ -37,32 +59,120 @@ import jax.numpy as jnp
 import numpy as np
 
 import lubjax
+from lubjax._indenter import motion_start
 
 from ._io import Trace
 
-N_PARAMS = 4
-PARAM_NAMES = ("E_star", "viscosity", "z0", "offset")
+DRIVES = ("travel", "spring", "force")
+LAYER_BASES = ("bonded", "frictionless")
 
-#: Accuracy of the model inside fits: the solver's own error control and tolerance; the force
-#: is held to rtol relative to itself only down to 1e-5 of its peak (a load cell's noise is
-#: ≥ 1e-3 of it), else the decaying hold of z̄0 > 1 traces chases the quantisation of the
-#: recorded travel through 10⁴ steps.
-FIT_SETTINGS = lubjax.Settings(force_floor=1e-5)
+#: Accuracy of the model inside fits: the solver's own error control at rtol = 1e-3 (143
+#: nodes; the solver's default 3e-4 has 271). Why not tighter: the model's error at the optimum
+#: is estimated and folded into the reported errors (fitting._stats), and at 1 % load-cell noise
+#: it stays under half a standard error (benchmarks/fit_coverage.py: rms z 1.0-1.1), while a run
+#: costs a quarter. The force is held to rtol relative to itself only down to 1e-5 of its peak
+#: (a load cell's noise is ≥ 1e-3 of it), else the decaying hold of z̄0 > 1 traces chases the
+#: quantisation of the recorded travel through 10⁴ steps. The attempt budget is 5000 (a
+#: bundled trace takes ≈ 300): the step record is max_steps long, and a batch of fits carries
+#: one per trace and tangent.
+FIT_SETTINGS = lubjax.Settings(rtol=1e-3, force_floor=1e-5, max_steps=5000)
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelSpec:
+    """What is fitted: the drive, the substrate and the offset (static: one per compiled model).
+
+    Args:
+        drive: "travel" (prescribed travel, the default), "spring" (travel through a load cell
+            of stiffness ``# stiffness_N_m:``) or "force" (load control).
+        layer: None (half-space) or (H [m], ν, "bonded" | "frictionless"): a layer of known
+            thickness on a rigid base.
+        viscoelastic: fit a standard linear solid (E0/E∞, τ) instead of an elastic solid.
+        fit_offset: fit a constant offset of the response channel.
+    """
+
+    drive: str = "travel"
+    layer: tuple | None = None
+    viscoelastic: bool = False
+    fit_offset: bool = True
+
+    def __post_init__(self):
+        if self.drive not in DRIVES:
+            raise ValueError(f"drive must be one of {', '.join(DRIVES)}, got {self.drive!r}")
+        if self.layer is not None:
+            try:
+                h, nu, base = self.layer
+                h, nu = float(h), float(nu)
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"layer must be (thickness_m, poisson, base), got {self.layer!r}"
+                ) from None
+            if not (math.isfinite(h) and h > 0):
+                raise ValueError(f"layer thickness must be finite and > 0 (metres), got {h!r}")
+            if not -1.0 < nu <= 0.5:
+                raise ValueError(f"layer Poisson ratio must be in (-1, 0.5], got {nu!r}")
+            if base not in LAYER_BASES:
+                raise ValueError(f"layer base must be 'bonded' or 'frictionless', got {base!r}")
+            object.__setattr__(self, "layer", (h, nu, base))
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Parameter names, in the order of θ."""
+        extra = ("stiffening", "relaxation_time") if self.viscoelastic else ()
+        return ("E_star", "viscosity", "z0", *extra, "offset")
+
+    @property
+    def response(self) -> str:
+        """The fitted channel: "force" or "displacement"."""
+        return "displacement" if self.drive == "force" else "force"
+
+    @property
+    def active(self) -> np.ndarray:
+        """Which θ components are fitted (the offset may be held at 0)."""
+        return np.array([n != "offset" or self.fit_offset for n in self.names])
+
+    def substrate_label(self) -> str:
+        geometry = "half-space" if self.layer is None else (
+            f"layer H = {self.layer[0]:.4g} m (nu = {self.layer[1]:g}, {self.layer[2]} base)"
+        )
+        return ("viscoelastic (standard linear solid) " if self.viscoelastic else "elastic ") + (
+            geometry
+        )
+
+
+#: Physical value x from its θ component, and dx/dθ (for standard errors by the delta method).
+def to_physical(name: str, theta_i: float, data_unit: float = 1.0) -> tuple[float, float]:
+    if name == "offset":
+        return theta_i * data_unit, data_unit
+    if name == "stiffening":
+        e = math.exp(theta_i)
+        return 1.0 + e, e
+    x = math.exp(theta_i)
+    return x, x
+
+
+def to_theta(name: str, value: float, data_unit: float = 1.0) -> float:
+    if name == "offset":
+        return value / data_unit
+    if name == "stiffening":
+        return math.log(max(value - 1.0, 1e-6))
+    return math.log(value)
 
 
 class Scales(NamedTuple):
     """Nominal scales read off a trace (SI)."""
 
     indent: float  # d_c [m]
-    speed: float  # v0 [m/s]
+    speed: float  # d_c/t_c [m/s] (the ramp speed for a prescribed travel)
     radius: float  # R [m]
     t_on: float  # motion start [s]; t̄ = (t - t_on)/t_c
-    time_scale: float  # t_c = d_c/v0 [s]
-    t_end_motion: float  # end of motion, t̄ units
-    force_unit: float  # F_u: the peak measured force [N]
+    time_scale: float  # t_c [s]
+    t_end_motion: float  # end of the input's ramp, t̄ units
+    response_unit: float  # y_u: the peak of |response| [N or m]
+    input_end: float  # u_end: final travel [m] or final load [N]
 
     def beta(self, E_star, viscosity):
-        """β = E* d_c^{5/2}/(6π η v0 R^{3/2}) (eq 8e); works on floats and jnp arrays."""
+        """β = E* d_c^{3/2} t_c/(6π η R^{3/2}) (eq 8e with v0 = d_c/t_c)."""
         return E_star * self.indent**2.5 / (6 * math.pi * viscosity * self.speed * self.radius**1.5)
 
     def force_scale(self, E_star):
@@ -70,57 +180,101 @@ class Scales(NamedTuple):
         return 2 * E_star * self.indent**1.5 * math.sqrt(self.radius) / math.pi
 
 
-def scales_from_trace(trace: Trace) -> Scales:
-    """d_c, v0, t_on (see module docstring). ValueError if the indenter does not move."""
-    t, d, f = trace.time, trace.displacement, trace.force
+def drive_of(trace: Trace, drive: str | None = None) -> str:
+    """The trace's drive: ``drive`` if given, else its ``# drive:`` header, else "spring" when
+    it gives ``# stiffness_N_m:``, else "travel"."""
+    if drive is None:
+        drive = trace.metadata.get("drive")
+        if drive is None:
+            drive = "spring" if "stiffness_N_m" in trace.metadata else "travel"
+    if drive not in DRIVES:
+        raise ValueError(f"{trace.name}: drive must be one of {', '.join(DRIVES)}, got {drive!r}")
+    if drive == "spring" and trace.meta_float("stiffness_N_m") is None:
+        raise ValueError(
+            f"{trace.name}: drive 'spring' needs the instrument stiffness in the header "
+            "('# stiffness_N_m: <N/m>')"
+        )
+    return drive
+
+
+def _channels(trace: Trace, drive: str):
+    """(input, response, input column name, response column name)."""
+    if drive == "force":
+        return trace.force, trace.displacement, "force_N", "displacement_m"
+    return trace.displacement, trace.force, "displacement_m", "force_N"
+
+
+def scales_from_trace(trace: Trace, drive: str | None = None) -> Scales:
+    """d_c, t_c, t_on and the ramp (see module docstring). ValueError if the input does not
+    ramp up and settle into a hold."""
+    drive = drive_of(trace, drive)
+    t = trace.time
+    u, y, ucol, ycol = _channels(trace, drive)
     n = t.size
     tail = max(3, n // 20)
-    indent = float(np.median(d[-tail:]))
-    if not indent > 0:
+    u_end = float(np.median(u[-tail:]))
+    what = "final travel" if drive != "force" else "final load"
+    if not u_end > 0:
         raise ValueError(
-            f"{trace.name}: column displacement_m: the final travel is {indent:g} m; it must be "
-            "positive (travel toward the substrate since the first row)"
+            f"{trace.name}: column {ucol}: the {what} is {u_end:g}; it must be positive "
+            "(toward the substrate, since the first row)"
         )
-    moving = np.flatnonzero(d > 1e-3 * indent)
+    moving = np.flatnonzero(u > 1e-3 * u_end)
     k = int(moving[0])
-    t_on = float(t[max(k - 1, 0)])
-    mid = 0.5 * (d[1:] + d[:-1])
-    speed_all = np.diff(d) / np.diff(t)
-    ramp = (mid > 0.2 * indent) & (mid < 0.8 * indent)
-    speed = (
-        float(np.median(speed_all[ramp]))
-        if np.count_nonzero(ramp) >= 2
-        else float(np.max(speed_all))
+    # The last sample at rest: where the record is exactly still before the motion (a
+    # noiseless encoder), else the last one below 10⁻³ u_end (lubjax's own breakpoint rule).
+    t_on = float(motion_start(t, u)) if k > 0 else float(t[0])
+    mid = 0.5 * (u[1:] + u[:-1])
+    rate_all = np.diff(u) / np.diff(t)
+    ramp = (mid > 0.2 * u_end) & (mid < 0.8 * u_end)
+    rate = float(np.median(rate_all[ramp])) if np.count_nonzero(ramp) >= 2 else float(
+        np.max(rate_all)
     )
-    if not speed > 0:
-        raise ValueError(
-            f"{trace.name}: column displacement_m: no approach ramp found (speed {speed:g})"
-        )
-    tc = indent / speed
-    settled = np.flatnonzero(np.abs(d - indent) > 1e-3 * indent)
+    if not rate > 0:
+        raise ValueError(f"{trace.name}: column {ucol}: no ramp found (rate {rate:g})")
+    tc = u_end / rate
+    settled = np.flatnonzero(np.abs(u - u_end) > 1e-3 * u_end)
     end = float(t[min(settled[-1] + 1, n - 1)]) if settled.size else float(t[k])
     if end >= t[-1]:
-        raise ValueError(
-            f"{trace.name}: column displacement_m: the travel never settles into a hold"
-        )
-    peak = float(np.max(f))
-    if not peak > 0:
-        raise ValueError(f"{trace.name}: column force_N: the force is never positive")
-    return Scales(indent, speed, trace.radius, t_on, tc, (end - t_on) / tc, peak)
+        raise ValueError(f"{trace.name}: column {ucol}: the input never settles into a hold")
+    if drive == "force":
+        indent = float(np.median(y[-tail:]))
+        if not indent > 0:
+            raise ValueError(
+                f"{trace.name}: column {ycol}: the final approach is {indent:g} m; under a load "
+                "toward the substrate it must be positive"
+            )
+    else:
+        indent = u_end
+    peak = float(np.max(np.abs(y)))
+    if not float(np.max(y)) > 0:
+        raise ValueError(f"{trace.name}: column {ycol}: the response is never positive")
+    return Scales(indent, indent / tc, trace.radius, t_on, tc, (end - t_on) / tc, peak, u_end)
+
+
+def noise_level(values: np.ndarray) -> float:
+    """Robust noise σ of a sampled channel from successive differences: 1.4826·MAD(Δy)/√2
+    (the smooth signal changes little between samples; white noise adds variance 2σ² to Δy)."""
+    dy = np.diff(values)
+    return float(1.4826 * np.median(np.abs(dy - np.median(dy))) / math.sqrt(2.0))
 
 
 class TraceData(NamedTuple):
     """The arrays one trace contributes to the model (a pytree; stack them to ``vmap``)."""
 
-    history: lubjax.SampledTravel  # measured d̄(t̄), padded to a common sample count
+    history: lubjax.SampledTravel  # measured input u(t̄)/u_end, padded to a common sample count
     t_end: jax.Array  # t̄ of the last sample
     t_data: jax.Array  # t̄ of the samples
-    force: jax.Array  # measured force [N]
+    response: jax.Array  # measured response [N or m]
     weight: jax.Array  # 1 for samples, 0 for padding
-    log_beta_unit: jax.Array  # ln[d_c^{5/2}/(6π v0 R^{3/2})]: ln β = ln E* - ln η + this
+    log_beta_unit: jax.Array  # ln[d_c^{3/2} t_c/(6π R^{3/2})]: ln β = ln E* - ln η + this
     indent: jax.Array  # d_c
+    time_scale: jax.Array  # t_c
     force_scale_unit: jax.Array  # 2 d_c^{3/2} √R/π: F = E* · this · F̄
-    force_unit: jax.Array  # F_u
+    response_unit: jax.Array  # y_u: the offset's unit
+    noise: jax.Array  # σ: the residuals' unit
+    drive_unit: jax.Array  # load F_end/force_scale_unit, or π k/(2√(R d_c)); ÷ E* gives the drive's
+    disc: lubjax.Discretisation | None  # a layer's own influence matrix (None: the solver's)
 
 
 class Solver(NamedTuple):
@@ -130,20 +284,19 @@ class Solver(NamedTuple):
     tol: lubjax.Tolerance
 
 
-def history(trace: Trace, scales: Scales) -> lubjax.SampledTravel:
-    """The measured travel d(t)/d_c on t̄ = (t - t_on)/t_c, from the last quiescent sample on.
+def history(trace: Trace, scales: Scales, drive: str) -> lubjax.SampledTravel:
+    """The measured input u(t)/u_end on t̄ = (t - t_on)/t_c, from the last sample at rest on.
 
-    The run starts at rest there. Known approximation: at 100 Hz the stage may already have
-    moved between t_on and the next sample, so the model misses the force of that first
-    fraction of a sample (1.6 % of the peak at the first moving sample of paper_dc140, then
-    < 1e-3). Starting the run at the first sample instead (the quiet stretch, then the exact
-    onset) is the better model, but the force emerging from exactly zero there sent the step
-    controller into 10⁴ tiny steps on the traces of data/ (issue note: open)."""
+    The run starts at rest there. Where the record is exactly still before the motion (an
+    encoder, a commanded load) t_on is the sample where the motion truly starts; a noisy input
+    falls back to the last sample below 10⁻³ u_end, and the model then misses the force of the
+    motion before it (1.6 % of the peak at the first moving sample of paper_dc140 with that
+    rule, 0.16 % with the exact one)."""
+    u = _channels(trace, drive)[0]
     tb = (trace.time - scales.t_on) / scales.time_scale
     keep = tb >= 0
     return lubjax.SampledTravel(
-        tb[keep], trace.displacement[keep] / scales.indent,
-        breakpoints=(0.0, scales.t_end_motion),
+        tb[keep], u[keep] / scales.input_end, breakpoints=(0.0, scales.t_end_motion)
     )
 
 
@@ -154,76 +307,140 @@ def make_solver(settings=None) -> Solver:
 
 
 def _pad_history(hist: lubjax.SampledTravel, n: int) -> lubjax.SampledTravel:
-    """Extend to n samples: times continue past the end, the travel is held (it is anyway)."""
+    """Extend to n samples: times continue past the end, the input is held (it is anyway)."""
     extra = n - hist.t.size
     t = np.concatenate([hist.t, hist.t[-1] + 1.0 + np.arange(extra)])
     d = np.concatenate([hist.travel_samples, np.full(extra, hist.travel_samples[-1])])
     return lubjax.SampledTravel(t, d, breakpoints=hist.breakpoints)
 
 
+def layer_substrate(spec: ModelSpec, scales: Scales):
+    """The ``lubjax.Layer`` of a spec with a layer: H̄ = H/√(R d_c) of this trace."""
+    h, nu, base = spec.layer
+    return lubjax.Layer(h / math.sqrt(scales.radius * scales.indent), nu, base)
+
+
 def trace_data(
-    trace: Trace, scales: Scales, n_pad: int | None = None, n_history: int | None = None
+    trace: Trace,
+    scales: Scales,
+    spec: ModelSpec,
+    mesh: lubjax.Mesh | None = None,
+    n_pad: int | None = None,
+    n_history: int | None = None,
 ) -> TraceData:
     """Arrays for one trace; pad the samples to ``n_pad`` with zero weight and the history to
-    ``n_history`` samples (so traces of different lengths stack)."""
+    ``n_history`` samples (so traces of different lengths stack). ``mesh``: the solver's (default
+    ``FIT_SETTINGS.mesh()``), needed for a layer's influence matrix."""
     n = trace.time.size
     n_pad = n if n_pad is None else n_pad
     pad = n_pad - n
     tb = (trace.time - scales.t_on) / scales.time_scale
-    hist = history(trace, scales)
+    hist = history(trace, scales, spec.drive)
     hist = _pad_history(hist, hist.t.size if n_history is None else n_history)
-    R = scales.radius
+    response = _channels(trace, spec.drive)[1]
+    R, dc, tc = scales.radius, scales.indent, scales.time_scale
+    fsu = scales.force_scale(1.0)
+    if spec.drive == "force":
+        drive_unit = scales.input_end / fsu
+    elif spec.drive == "spring":
+        drive_unit = math.pi * trace.meta_float("stiffness_N_m") / (2 * math.sqrt(R * dc))
+    else:
+        drive_unit = 0.0
+    disc = None if spec.layer is None else _layer_disc(
+        FIT_SETTINGS.mesh() if mesh is None else mesh, layer_substrate(spec, scales)
+    )
+    sigma = max(noise_level(response), 1e-6 * scales.response_unit)
     return TraceData(
         history=hist,
         t_end=jnp.asarray(float(tb[-1])),
         t_data=jnp.asarray(np.pad(tb, (0, pad), mode="edge")),
-        force=jnp.asarray(np.pad(trace.force, (0, pad), mode="edge")),
+        response=jnp.asarray(np.pad(response, (0, pad), mode="edge")),
         weight=jnp.asarray(np.pad(np.ones(n), (0, pad))),
-        log_beta_unit=jnp.asarray(
-            math.log(scales.indent**2.5 / (6 * math.pi * scales.speed * R**1.5))
-        ),
-        indent=jnp.asarray(scales.indent),
-        force_scale_unit=jnp.asarray(scales.force_scale(1.0)),
-        force_unit=jnp.asarray(scales.force_unit),
+        log_beta_unit=jnp.asarray(math.log(dc**1.5 * tc / (6 * math.pi * R**1.5))),
+        indent=jnp.asarray(dc),
+        time_scale=jnp.asarray(tc),
+        force_scale_unit=jnp.asarray(fsu),
+        response_unit=jnp.asarray(scales.response_unit),
+        noise=jnp.asarray(sigma),
+        drive_unit=jnp.asarray(drive_unit),
+        disc=disc,
     )
 
 
+def _layer_disc(mesh, layer):
+    try:
+        return lubjax.discretise(mesh, layer)
+    except ImportError as exc:  # lubjax/_layer.py (the layer's influence matrix) is missing
+        raise RuntimeError(
+            f"the layer substrate needs the layer's influence matrix (lubjax/_layer.py), which "
+            f"this installation lacks ({exc})"
+        ) from None
+
+
 def history_size(trace: Trace, scales: Scales) -> int:
-    """Number of travel samples :func:`trace_data` uses for ``trace`` before padding."""
+    """Number of input samples :func:`trace_data` uses for ``trace`` before padding."""
     return int(np.count_nonzero(trace.time >= scales.t_on))
 
 
 def dimensionless(theta, data: TraceData):
-    """(β, z̄0) from θ = (ln E*, ln η, ln z0, b/F_u)."""
+    """(β, z̄0) from θ."""
     beta = jnp.exp(theta[0] - theta[1] + data.log_beta_unit)
     return beta, jnp.exp(theta[2]) / data.indent
 
 
-def predict(theta, data: TraceData, solver: Solver):
-    """Model force [N] at the samples, and the thinnest film min h̄ over the run (must stay > 0;
-    -inf when the run did not reach its last sample)."""
+def _drive(spec: ModelSpec, data: TraceData, E_star):
+    if spec.drive == "force":
+        return lubjax.Load(data.drive_unit / E_star, data.history)
+    if spec.drive == "spring":
+        return lubjax.Spring(data.drive_unit / E_star, data.history)
+    return lubjax.Travel(data.history)
+
+
+def _substrate(spec: ModelSpec, theta, data: TraceData):
+    """The substrate as the stepper sees it: a creep compliance (the geometry, half-space or
+    layer, is the influence matrix in the discretisation, lubjax/_substrate.py). A layer's
+    thickness H̄ differs per trace and is static in ``lubjax.Layer``, so traces of one batch
+    carry their own influence matrix (``data.disc``) and share the half-space's compliance
+    type here: J ≡ 1, or the standard linear solid."""
+    if not spec.viscoelastic:
+        return lubjax.HalfSpace()
+    stiffening = 1.0 + jnp.exp(theta[3])
+    tau_bar = jnp.exp(theta[4]) / data.time_scale
+    return lubjax.Viscoelastic.standard_linear_solid(stiffening, tau_bar)
+
+
+def predict(theta, data: TraceData, solver: Solver, spec: ModelSpec, mode: str = "forward"):
+    """Model response at the samples [N or m], and the thinnest film min h̄ over the run (must
+    stay > 0; -inf when the run did not reach its last sample). ``mode``: the rollout's
+    (``"forward"``: while_loop, jvp; ``"reverse"``: checkpointed scan, also ``jax.grad``)."""
+    E_star = jnp.exp(theta[0])
     beta, z0_bar = dimensionless(theta, data)
+    disc = solver.disc if data.disc is None else data.disc
     traj = lubjax.rollout(
-        solver.disc, beta, z0_bar, data.history, data.t_end, solver.tol, mode="forward"
+        disc, beta, z0_bar, _drive(spec, data, E_star), data.t_end, solver.tol,
+        substrate=_substrate(spec, theta, data), mode=mode,
     )
-    fbar = lubjax.evaluate(traj.steps, data.t_data, "force")
-    force = jnp.exp(theta[0]) * data.force_scale_unit * fbar + theta[3] * data.force_unit
+    if spec.response == "force":
+        y = E_star * data.force_scale_unit * lubjax.evaluate(traj.steps, data.t_data, "force")
+    else:
+        y = data.indent * (z0_bar - lubjax.evaluate(traj.steps, data.t_data, "gap"))
+    y = y + theta[-1] * data.response_unit
     film = jnp.min(jnp.where(traj.steps.accepted, traj.steps.film_min, jnp.inf))
     film = jnp.where(traj.finished, film, -jnp.inf)
-    return force, film
+    return y, film
 
 
-def residuals(theta, data: TraceData, solver: Solver):
-    """r_k = w_k (F_k(θ) - F_k^data)/F_u, and min h̄ as aux."""
-    force, film_min = predict(theta, data, solver)
-    return data.weight * (force - data.force) / data.force_unit, film_min
+def residuals(theta, data: TraceData, solver: Solver, spec: ModelSpec):
+    """r_k = w_k (y_k(θ) - y_k^data)/σ, and min h̄ as aux."""
+    y, film_min = predict(theta, data, solver, spec)
+    return data.weight * (y - data.response) / data.noise, film_min
 
 
-def residuals_and_jacobian(theta, data: TraceData, solver: Solver):
+def residuals_and_jacobian(theta, data: TraceData, solver: Solver, spec: ModelSpec):
     """(r, J = ∂r/∂θ, min h̄) by forward mode: one jvp per parameter, batched with vmap."""
 
     def f(th):
-        return residuals(th, data, solver)
+        return residuals(th, data, solver, spec)
 
     def column(v):
         (r, film), (dr, _) = jax.jvp(f, (theta,), (v,))
@@ -233,16 +450,17 @@ def residuals_and_jacobian(theta, data: TraceData, solver: Solver):
     return r, cols, film
 
 
-@functools.lru_cache(maxsize=8)
-def batched_functions():
-    """jit-compiled, trace-batched model functions (vmap over θ and data; the solver is shared,
-    its tolerance static)."""
-    res = jax.jit(jax.vmap(residuals, in_axes=(0, 0, None)))
-    rj = jax.jit(jax.vmap(residuals_and_jacobian, in_axes=(0, 0, None)))
-    pred = jax.jit(jax.vmap(predict, in_axes=(0, 0, None)))
-    return res, rj, pred
+@functools.lru_cache(maxsize=16)
+def batched_functions(spec: ModelSpec):
+    """jit-compiled, trace-batched (r, J, film) and (y, film) for ``spec`` (vmap over θ and the
+    data; the solver is shared, its tolerance static)."""
+    rj = jax.jit(jax.vmap(functools.partial(residuals_and_jacobian, spec=spec),
+                          in_axes=(0, 0, None)))
+    pred = jax.jit(jax.vmap(functools.partial(predict, spec=spec), in_axes=(0, 0, None)))
+    return rj, pred
 
 
 def stack(datas: list[TraceData]) -> TraceData:
     """Stack per-trace arrays along a new leading (batch) axis."""
     return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *datas)
+

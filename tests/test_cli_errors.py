@@ -26,6 +26,7 @@ import lubjax._solve as lsolve
 from fitting import _cli as fcli
 from fitting._fit import FitResult, Start
 from fitting._io import TraceError, parse_trace, read_trace
+from fitting._model import ModelSpec, Scales
 from lubjax import _files
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -64,16 +65,23 @@ def _fake_result(t_end=1.0, n=20):
 
 
 def _fake_fit(traces, **kwargs):
+    spec = ModelSpec()
+    names = spec.names
     out = []
     for tr in traces:
+        scales = Scales(1.4e-4, 1e-4, tr.radius, 1.0, 1.4, 1.0, 0.036, 1.4e-4)
+        stats = dict(n_samples=tr.time.size, n_parameters=4, dof=tr.time.size - 4, chi2=1.0,
+                     reduced_chi2=1.0, autocorrelation_lag1=0.0, durbin_watson=2.0,
+                     noise_model="white", n_effective=float(tr.time.size), log_likelihood=0.0,
+                     aic=8.0, bic=10.0, rms_residual=1e-4, noise_sigma=1e-4, condition=10.0,
+                     max_correlation=0.5, error_parts={})
         values = dict(
-            name=tr.name, E_star=3.9e6, viscosity=100.0, z0=1.4e-4, offset=0.0,
-            stderr=dict(E_star=1e4, viscosity=1.0, z0=1e-6, offset=1e-5),
-            correlation=np.eye(4), beta=54.0, z0_over_dc=1.0, indent=1.4e-4, speed=1e-4,
-            radius=tr.radius, rms_residual=1e-4, converged=True, identifiable=True,
-            condition=10.0, n_iterations=3, n_model_runs=7, method="lm", wall_s=0.1,
-            start=Start(3e6, 80.0, 1.2e-4, 0.0, ()), flags=("ok",), time=tr.time,
-            force=tr.force, model=tr.force, metadata=tr.metadata,
+            name=tr.name, spec=spec, values=dict(zip(names, (3.9e6, 100.0, 1.4e-4, 0.0))),
+            stderr=dict(zip(names, (1e4, 1.0, 1e-6, 1e-5))), correlation=np.eye(4), shared=(),
+            group=(), scales=scales, stats=stats, converged=True, identifiable=True,
+            n_iterations=3, n_model_runs=7, method="lm", wall_s=0.1,
+            start=Start(dict(zip(names, (3e6, 80.0, 1.2e-4, 0.0))), ()), flags=("ok",),
+            time=tr.time, data=tr.force, model=tr.force, metadata=tr.metadata,
         )  # fmt: skip
         out.append(FitResult(**{k: values.get(k) for k in FitResult._fields}))
     return out

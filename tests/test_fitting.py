@@ -1,10 +1,12 @@
-"""The fit: forward-mode gradients, recovery of the synthetic truth, honest standard errors, CLI.
+"""The fit: forward-mode gradients, every drive and substrate, recovery of the synthetic truth.
 
-The synthetic traces in data/ come from a much finer, fixed-grid solver than the fit's
-error-controlled model (data/make_synthetic.py), so recovery tests include the model's
+The synthetic traces in data/ come from a much finer solver run than the fit's model
+(data/make_synthetic.py: rtol 1e-7, Δr̄ = 0.01, 544 nodes, the input sampled at 40,001 points;
+the fit sees the 100 Hz record at rtol 3e-4, 271 nodes), so recovery tests include the model's
 discretisation error.
 """
 
+import importlib.util
 import json
 import math
 import os
@@ -16,15 +18,12 @@ import pytest
 
 import fitting
 import lubjax
-from fitting import _fit
 
 DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data")
 PAPER = ["paper_dc126", "paper_dc140", "paper_dc154"]
-KEYS = [
-    ("E_star", "true_E_star_Pa", 0.02),
-    ("viscosity", "true_viscosity_Pa_s", 0.05),
-    ("z0", "true_z0_m", 0.02),
-]
+TRUE = {"E_star": "true_E_star_Pa", "viscosity": "true_viscosity_Pa_s", "z0": "true_z0_m",
+        "stiffening": "true_stiffening", "relaxation_time": "true_relaxation_time_s"}
+HAS_LAYER = importlib.util.find_spec("lubjax._layer") is not None
 
 
 def _trace(stem, clean=False):
@@ -37,14 +36,27 @@ def _trace(stem, clean=False):
 
 
 COARSE = lubjax.Settings(dr=0.05, mesh_growth=1.2, length=100.0, error_estimate=False)
+SPEC = fitting.ModelSpec()
 
 
-def _short(stem, t_bar):
-    tr = _trace(stem, clean=True)
+def _short(stem, t_bar, clean=True):
+    tr = _trace(stem, clean=clean)
     sc = fitting.scales_from_trace(tr)
     keep = tr.time < sc.t_on + t_bar * sc.time_scale
     tr = tr._replace(time=tr.time[keep], displacement=tr.displacement[keep], force=tr.force[keep])
     return tr, fitting.scales_from_trace(tr)
+
+
+def _z_scores(res, tr):
+    return {n: (res.values[n] - float(tr.metadata[k])) / res.stderr[n]
+            for n, k in TRUE.items() if n in res.values and k in tr.metadata}
+
+
+def _assert_recovers(res, tr, z_max=3.0):
+    """Every parameter with a true value within z_max of its reported standard error."""
+    assert res.converged and res.identifiable, res.flags
+    z = _z_scores(res, tr)
+    assert z and all(abs(v) < z_max for v in z.values()), (tr.name, z)
 
 
 def test_gradient_matches_central_differences():
@@ -52,18 +64,19 @@ def test_gradient_matches_central_differences():
 
     The adaptive model is smooth in the parameters only up to its step choices (the step sizes
     are not differentiated), so ε is sized to that noise, not to eps. At rtol = 1e-7 and
-    ε = 1e-3·|x| the quotient scatters by ≤ 5e-4 of the largest derivative (measured: 4e-4,
-    5e-4, 6e-5 for E*, η, z0; ε = 1e-4 is noise-dominated, ε = 1e-2 truncation-dominated for
-    z0). The smooth-history check at 1e-4 is tests/test_stepper.py."""
+    ε = 1e-3·|x| the quotient scatters by ≤ 5e-4 of the largest derivative (ε = 1e-4 is
+    noise-dominated, ε = 1e-2 truncation-dominated for z0). The smooth-history check at 1e-4 is
+    tests/test_stepper.py."""
     tr, sc = _short("paper_dc140", 2.5)
-    solver = fitting.make_solver(lubjax.Settings(
-        rtol=1e-7, dr=0.05, mesh_growth=1.2, length=100.0, max_steps=100_000))
-    data = fitting.trace_data(tr, sc)
+    settings = lubjax.Settings(rtol=1e-7, dr=0.05, mesh_growth=1.2, length=100.0,
+                               max_steps=100_000)
+    solver = fitting.make_solver(settings)
+    data = fitting.trace_data(tr, sc, SPEC, settings.mesh())
     x = jnp.array([3.92e6, 100.0, 140e-6])
 
     def force(p):
         theta = jnp.concatenate([jnp.log(p), jnp.zeros(1)])
-        return fitting.predict(theta, data, solver)[0]
+        return fitting.predict(theta, data, solver, SPEC)[0]
 
     J = np.asarray(jax.jit(jax.jacfwd(force))(x))
     f = jax.jit(force)
@@ -75,75 +88,128 @@ def test_gradient_matches_central_differences():
         assert err <= 1e-3, (i, err)
 
 
-def test_residual_jacobian_is_forward_mode_and_consistent():
+@pytest.mark.parametrize("spec", [SPEC, fitting.ModelSpec(viscoelastic=True)],
+                         ids=["elastic", "viscoelastic"])
+def test_residual_jacobian_is_forward_mode_and_consistent(spec):
     tr, sc = _short("paper_dc126", 1.5)
     solver = fitting.make_solver(COARSE)
-    data = fitting.trace_data(tr, sc)
-    theta = jnp.array([math.log(3.92e6), math.log(100.0), math.log(126e-6), 0.0])
-    r, J, film = jax.jit(fitting.residuals_and_jacobian)(theta, data, solver)
-    J2 = jax.jit(jax.jacfwd(lambda th: fitting.residuals(th, data, solver)[0]))(theta)
+    data = fitting.trace_data(tr, sc, spec, COARSE.mesh())
+    theta = [math.log(3.92e6), math.log(100.0), math.log(126e-6)]
+    theta = jnp.array(theta + ([math.log(0.3), math.log(0.5)] if spec.viscoelastic else []) + [0.0])
+    r, J, film = jax.jit(fitting.residuals_and_jacobian, static_argnums=3)(
+        theta, data, solver, spec)
+    J2 = jax.jit(jax.jacfwd(lambda th: fitting.residuals(th, data, solver, spec)[0]))(theta)
     # Two compilations round differently; where an error ratio sits at 1 that flips an
     # accept/reject decision and the run takes other (equally valid) steps: the two agree to the
     # model's accuracy at rtol = 3e-4 (measured 1e-3 of the largest entry), not to the last bit.
-    scale = np.max(np.abs(J[:, :3]))
-    np.testing.assert_allclose(J[:, :3], J2[:, :3], rtol=0, atol=3e-3 * scale)
-    assert float(film) > 0
-    # Offset column: ∂r/∂b = w (in F_u units).
-    np.testing.assert_allclose(J[:, 3], 1.0)
+    p = theta.shape[0] - 1
+    scale = np.max(np.abs(J[:, :p]))
+    np.testing.assert_allclose(J[:, :p], J2[:, :p], rtol=0, atol=3e-3 * scale)
+    assert float(film) > 0 and np.all(np.max(np.abs(J[:, :p]), axis=0) > 0)
+    # Offset column: ∂r/∂b = y_u/σ.
+    np.testing.assert_allclose(J[:, -1], float(data.response_unit / data.noise))
 
 
 def test_model_matches_an_independent_fine_solver():
-    """The fit's model at the true parameters against the clean trace made by the earlier
-    fixed-grid solver on a much finer grid (data/make_synthetic.py): within 0.3 % of the peak
-    at every sample after the first moving one (both are discretisations; this bounds their
-    difference). The first moving sample is off by ~1.5 % of the peak: the model starts at rest
-    at t_on, while the stage started between samples (fitting/_model.py, history)."""
+    """The fit's model at the true parameters against the clean trace of the fine generator:
+    rms within 3e-4 of the peak, every sample within 3e-3 (measured 1.4e-4 and 2.2e-3, the
+    largest where the lagged stage stops: the 100 Hz record of the travel, monotone-cubic
+    interpolated, is all the model knows of the motion between samples)."""
     tr = _trace("paper_dc140", clean=True)
     sc = fitting.scales_from_trace(tr)
     solver = fitting.make_solver()
-    data = fitting.trace_data(tr, sc)
+    data = fitting.trace_data(tr, sc, SPEC)
     theta = jnp.array([math.log(3.92e6), math.log(100.0), math.log(140e-6), 0.0])
-    model, film = jax.jit(fitting.predict)(theta, data, solver)
-    after = tr.time > sc.t_on + 0.015
-    err = np.max(np.abs(np.asarray(model) - tr.force)[after]) / np.max(tr.force)
-    assert err < 3e-3 and float(film) > 0
+    model, film = jax.jit(fitting.predict, static_argnums=3)(theta, data, solver, SPEC)
+    err = (np.asarray(model) - tr.force) / np.max(tr.force)
+    assert np.sqrt(np.mean(err**2)) < 3e-4 and np.max(np.abs(err)) < 3e-3 and float(film) > 0
 
 
-def test_starting_values_from_physics_are_within_a_factor_two():
-    for stem in PAPER:
-        tr = _trace(stem)
-        st = fitting.initial_guess(tr, fitting.scales_from_trace(tr))
-        for key, true_key, _ in KEYS:
-            ratio = getattr(st, key) / float(tr.metadata[true_key])
-            assert 0.5 < ratio < 2.0, (stem, key, ratio)
+@pytest.mark.parametrize("stem", PAPER + ["spring_dc140", "creep_30mN"])
+def test_starting_values_from_physics_are_within_a_factor_two(stem):
+    tr = _trace(stem)
+    spec = fitting.ModelSpec(drive=fitting._model.drive_of(tr))
+    st = fitting.initial_guess(tr, fitting.scales_from_trace(tr), spec)
+    for name in ("E_star", "viscosity", "z0"):
+        ratio = st.values[name] / float(tr.metadata[TRUE[name]])
+        assert 0.5 < ratio < 2.0, (stem, name, ratio, st.notes)
 
 
-def test_batched_fit_recovers_paper_traces():
-    """One batched LM call for the three paper traces (shared grid, vmap): E* 2 %, η 5 %, z0 2 %."""
+def test_drive_from_header_and_option():
+    assert fitting._model.drive_of(_trace("creep_30mN")) == "force"
+    assert fitting._model.drive_of(_trace("spring_dc140")) == "spring"
+    assert fitting._model.drive_of(_trace("paper_dc140")) == "travel"
+    with pytest.raises(ValueError, match="stiffness_N_m"):
+        fitting._model.drive_of(_trace("paper_dc140"), "spring")
+    sc = fitting.scales_from_trace(_trace("creep_30mN"))
+    assert sc.input_end == pytest.approx(0.03, rel=1e-6)  # the load's plateau
+    assert sc.time_scale == pytest.approx(1.0, rel=0.1)  # the ramp time
+
+
+@pytest.mark.slow
+def test_separate_and_joint_fits_of_the_paper_traces():
+    """The three paper traces (same E*, η; d_c = 126, 140, 154 μm) fitted separately in one
+    batched LM call (one vmap), then jointly with E* and η shared and z0 and the offset per
+    trace: both recover the truth within three standard errors, the reduced χ² is near 1 (1 %
+    white noise), and the joint errors of the shared parameters are smaller than every separate
+    fit's (three traces' worth of data: about 1/√3 of them)."""
     traces = [_trace(s) for s in PAPER]
-    results = fitting.fit_traces(traces)
-    for tr, res in zip(traces, results, strict=True):
-        assert res.converged and res.identifiable, res.flags
-        for key, true_key, tol in KEYS:
-            err = getattr(res, key) / float(tr.metadata[true_key]) - 1
-            assert abs(err) < tol, (tr.name, key, err)
-            assert res.stderr[key] > 0
+    separate = fitting.fit_traces(traces)
+    for tr, res in zip(traces, separate, strict=True):
+        _assert_recovers(res, tr)
         assert res.rms_residual == pytest.approx(float(tr.metadata["noise_N"]), rel=0.15)
-        assert res.beta == pytest.approx(float(tr.metadata["true_beta"]), rel=0.1)
+        assert res.stats["reduced_chi2"] == pytest.approx(1.0, abs=0.15)
+        assert res.stats["noise_model"] == "white"
+    joint = fitting.fit_traces(traces, shared=("E_star", "viscosity"))
+    for tr, res in zip(traces, joint, strict=True):
+        _assert_recovers(res, tr)
+        assert res.shared == ("E_star", "viscosity") and len(res.group) == 3
+        assert res.stats["n_samples"] == sum(t.time.size for t in traces)
+        for n in ("E_star", "viscosity"):
+            assert res.values[n] == joint[0].values[n]
+            assert res.stderr[n] < min(s.stderr[n] for s in separate), n
+    ratio = joint[0].stderr["E_star"] / np.mean([s.stderr["E_star"] for s in separate])
+    assert 0.4 < ratio < 0.8, ratio
 
 
-def test_flags_non_identifiable_parameters():
-    """Collinear Jacobian columns -> huge correlation/condition -> flagged."""
-    rng = np.random.default_rng(0)
-    n = 50
-    J = rng.normal(size=(n, 4))
-    J[:, 1] = J[:, 0] * 2.0 + 1e-6 * rng.normal(size=n)
-    r = rng.normal(size=n) * 1e-2
-    active = np.ones(4, bool)
-    _, cov, cond = _fit._covariance(r, J, active, n)
-    assert cond > 1e8
-    corr = cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov)))
-    assert abs(corr[0, 1]) > 0.999
+@pytest.mark.slow
+@pytest.mark.parametrize("stem", ["creep_30mN", "spring_dc140"])
+def test_fit_recovers_load_controlled_and_spring_traces(stem):
+    """Force control (the load is the input, the displacement the response; lubjax.Load) and a
+    sphere on a load cell of known stiffness (lubjax.Spring): E*, η, z0 within three standard
+    errors of the truth."""
+    tr = _trace(stem)
+    res = fitting.fit_trace(tr)
+    assert res.spec.drive == {"creep_30mN": "force", "spring_dc140": "spring"}[stem]
+    _assert_recovers(res, tr)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not HAS_LAYER, reason="lubjax/_layer.py (the layer's influence matrix) is "
+                    "not in this checkout yet")
+def test_a_very_thick_layer_fits_like_the_half_space():
+    """H = 1 m (H̄ ≈ 2000 √(R d_c)) on a rigid base is a half-space to the model's accuracy: the
+    layer path (its own influence matrix per trace) gives the half-space's fit."""
+    tr, _ = _short("paper_dc140", 3.0, clean=False)
+    half = fitting.fit_trace(tr, settings=COARSE, model_error=False)
+    thick = fitting.fit_trace(tr, settings=COARSE, model_error=False, layer=(1.0, 0.5, "bonded"))
+    for n in ("E_star", "viscosity", "z0"):
+        assert abs(thick.values[n] / half.values[n] - 1) < 0.2 * half.stderr[n] / half.values[n]
+
+
+@pytest.mark.slow
+def test_model_comparison_asks_for_viscoelasticity_only_when_it_is_there():
+    """The same comparison on a trace made with a standard linear solid (E0/E∞ = 1.5,
+    τ = 0.5 s) and on one made without: the richer model is chosen for the first, and its
+    E0/E∞ and τ recovered; the elastic model for the second."""
+    visco = _trace("visco_dc140")
+    _, rich, cmp_visco = fitting.compare_models([visco])
+    assert cmp_visco["choice"] == cmp_visco["rich"], cmp_visco["report"]
+    _assert_recovers(rich[0], visco)
+    plain = _trace("paper_dc140")
+    _, _, cmp_plain = fitting.compare_models([plain], max_iter=25)
+    assert cmp_plain["choice"] == cmp_plain["simple"], cmp_plain["report"]
+    assert cmp_plain["delta_bic"] < 0 < cmp_visco["delta_bic"]
 
 
 def test_bad_arguments_raise_value_error():
@@ -154,36 +220,64 @@ def test_bad_arguments_raise_value_error():
         fitting.fit_traces([tr], max_iter=0)
     with pytest.raises(ValueError, match="traces"):
         fitting.fit_traces([])
+    with pytest.raises(ValueError, match="shared: unknown parameter"):
+        fitting.fit_traces([tr, tr], shared=("offset",))
+    with pytest.raises(ValueError, match="one drive"):
+        fitting.fit_traces([tr, _trace("creep_30mN")])
+    with pytest.raises(ValueError, match="layer thickness"):
+        fitting.ModelSpec(layer=(-1.0, 0.5, "bonded"))
+    with pytest.raises(ValueError, match="layer base"):
+        fitting.ModelSpec(layer=(1e-3, 0.5, "glued"))
 
 
-def test_cli_writes_json_and_plot(tmp_path, capsys):
+def test_cli_writes_json_report_and_plot(tmp_path, capsys):
     from fitting._cli import main
 
+    tr, _ = _short("paper_dc154", 4.0, clean=False)
+    src = tmp_path / "short.csv"
+    fitting.write_trace(src, tr)
     out = tmp_path / "sub" / "fit.json"
     png = tmp_path / "sub" / "fit.png"
-    rc = main(
-        [os.path.join(DATA, "paper_dc154.csv"), "--out", str(out), "--plot", str(png), "--quiet"]
-    )
+    rep = tmp_path / "sub" / "fit.txt"
+    rc = main([str(src), "--out", str(out), "--plot", str(png), "--report", str(rep),
+               "--quiet", "--no-cache"])
     assert rc == 0
     d = json.loads(out.read_text())
-    for key in [
-        "E_star_Pa",
-        "viscosity_Pa_s",
-        "z0_m",
-        "stderr",
-        "beta",
-        "z0_over_dc",
-        "rms_residual_N",
-        "converged",
-        "n_iterations",
-        "wall_s",
-    ]:
+    for key in ["E_star_Pa", "viscosity_Pa_s", "z0_m", "stderr", "beta", "z0_over_dc",
+                "rms_residual_N", "converged", "n_iterations", "wall_s", "statistics",
+                "error_budget", "correlation", "start", "model"]:
         assert key in d
     assert set(d["stderr"]) >= {"E_star_Pa", "viscosity_Pa_s", "z0_m"}
     assert d["converged"] is True
-    assert abs(d["vs_true"]["z0_m"]["relative_error"]) < 0.02
+    assert abs(d["vs_true"]["z0_m"]["z_score"]) < 3
     assert png.stat().st_size > 10_000
+    text = rep.read_text()
+    for section in ("[[Fit Statistics]]", "[[Variables]]", "[[Correlations]]", "reduced chi"):
+        assert section in text
     assert "E* =" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--substrate", "layer"], "--substrate layer needs --thickness"),
+    (["--thickness", "5e-3"], "--thickness: only with --substrate layer"),
+    (["--shared", "E_star"], "--shared needs at least two traces"),
+    (["--shared", "E_star,colour"], "--shared: unknown parameter(s) colour"),
+    (["--compare", "--substrate", "viscoelastic"], "--compare fits the viscoelastic model"),
+    (["--drive", "spring"], "stiffness_N_m"),
+    (["--drive", "pull"], "argument --drive: invalid choice"),
+])
+def test_cli_model_options_are_checked_before_fitting(argv, message, tmp_path, capsys,
+                                                      monkeypatch):
+    from fitting import _cli
+
+    def no_fit(*a, **k):
+        raise AssertionError("fitting started before the options were checked")
+
+    monkeypatch.setattr(_cli, "fit_traces", no_fit)
+    monkeypatch.setattr(_cli, "compare_models", no_fit)
+    rc = _cli.main([os.path.join(DATA, "paper_dc140.csv"), *argv, "--quiet", "--no-cache"])
+    err = capsys.readouterr().err
+    assert rc == 2 and message in err and len(err.strip().splitlines()) == 1, err
 
 
 def test_cli_reports_bad_file(tmp_path, capsys):
@@ -193,32 +287,3 @@ def test_cli_reports_bad_file(tmp_path, capsys):
     p.write_text("time_s,displacement_m,force_N\n0,0,0\n")
     assert main([str(p), "--quiet"]) == 2
     assert "radius_m" in capsys.readouterr().err
-
-
-@pytest.mark.slow
-def test_standard_errors_match_scatter_over_noise_draws():
-    """Refit 8 noise draws (1 % of peak) of a noiseless fine-grid trace in one batched call: the
-    z-scores (estimate - truth)/stderr must be O(1), the scatter of the estimates must match the
-    reported standard errors, and the mean estimate must be within the recovery tolerances.
-
-    (Single draws of E* can miss 2 %: its standard error at 1 % noise is ~1.3 % for these traces.)
-    """
-    clean = _trace("paper_dc154", clean=True)
-    sigma = 0.01 * float(np.max(clean.force))
-    rng = np.random.default_rng(2024)
-    draws = [
-        clean._replace(force=clean.force + rng.normal(0, sigma, clean.force.size), name=f"draw{k}")
-        for k in range(8)
-    ]
-    results = fitting.fit_traces(draws)
-    assert all(r.converged for r in results)
-    for key, true_key, tol in KEYS:
-        true = float(clean.metadata[true_key])
-        est = np.array([getattr(r, key) for r in results])
-        se = np.array([r.stderr[key] for r in results])
-        z = (est - true) / se
-        print(key, "errors", np.round(est / true - 1, 4), "z", np.round(z, 2))
-        assert abs(np.mean(est) / true - 1) < tol, (key, est / true - 1)
-        assert np.sqrt(np.mean(z**2)) < 2.5, (key, z)
-        ratio = np.std(est, ddof=1) / np.mean(se)
-        assert 0.4 < ratio < 2.0, (key, ratio)

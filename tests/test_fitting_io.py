@@ -114,7 +114,26 @@ def test_bundled_traces_are_valid_and_small():
         assert os.path.getsize(path) < 1_000_000
         tr = read_trace(path)
         s = scales_from_trace(tr)
-        # dc and v0 come from the data: they match the generator's truth.
-        assert s.indent == pytest.approx(float(tr.metadata["true_indent_m"]), rel=1e-3)
-        assert s.speed == pytest.approx(float(tr.metadata["true_speed_m_s"]), rel=1e-2)
+        # dc and v0 (the load and its ramp) come from the data: they match the generator's truth.
+        if tr.metadata.get("drive") == "force":
+            assert s.input_end == pytest.approx(float(tr.metadata["true_load_N"]), rel=1e-3)
+            assert s.time_scale == pytest.approx(float(tr.metadata["load_ramp_s"]), rel=1e-2)
+        else:
+            assert s.indent == pytest.approx(float(tr.metadata["true_indent_m"]), rel=1e-3)
+            assert s.speed == pytest.approx(float(tr.metadata["true_speed_m_s"]), rel=1e-2)
         assert s.t_on == pytest.approx(float(tr.metadata["motion_start_s"]), abs=0.05)
+
+
+@pytest.mark.parametrize("header, match", [
+    ("# radius_m: 2e-3\n# drive: pull\n", r"line 2: drive must be one of travel, spring, force"),
+    ("# radius_m: 2e-3\n# stiffness_N_m: -5\n", r"line 2: stiffness_N_m .* must be a finite"),
+    ("# radius_m: 2e-3\n# stiffness_N_m: stiff\n", r"line 2: stiffness_N_m"),
+])
+def test_model_header_keys_are_checked(header, match):
+    with pytest.raises(ValueError, match=match):
+        parse_trace(_text(header=header), name="x.csv")
+
+
+def test_model_header_keys_are_kept():
+    tr = parse_trace(_text(header="# radius_m: 2e-3\n# drive: force\n# stiffness_N_m: 5e3\n"))
+    assert tr.metadata["drive"] == "force" and tr.meta_float("stiffness_N_m") == 5e3

@@ -1,0 +1,109 @@
+r"""Is the richer model needed? Compare two fits of the same trace(s) by likelihood.
+
+The default (elastic) model is nested in the richer one (a standard linear solid with E0/E∞ → 1,
+or any spec with more parameters). Both are fitted to the same data; with Gaussian noise of
+unknown scale the profile log-likelihood is ℓ = -(n/2) ln(χ²/n) (+ a constant common to both),
+and
+
+* the likelihood ratio LR = 2(ℓ_rich - ℓ_simple), with a nominal χ²(Δk) p-value: only a guide,
+  since E0/E∞ = 1 lies on the boundary of the richer model and τ is then undefined (the
+  classical χ² law does not hold there: Self & Liang 1987, Davies 1987);
+* AIC = 2k - 2ℓ and BIC = k ln n - 2ℓ (k: fitted parameters + the noise scale).
+
+Decision: the richer model only when ΔBIC = BIC_simple - BIC_rich > ``BIC_MARGIN`` (10: "very
+strong" evidence on Kass & Raftery's scale); BIC, unlike AIC, does not pick the larger model
+more often as n grows when the smaller one is true. Where the residuals are correlated (AR(1)
+noise model) the information is counted in effective samples: ℓ × n_eff/n.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from scipy.stats import chi2 as chi2_law
+
+from . import _model
+from ._fit import Start, fit_traces
+
+BIC_MARGIN = 10.0
+
+
+def _information(results) -> dict:
+    """ℓ, k, n (effective) of a fit: summed over separately fitted traces."""
+    seen, ll, k, n, n_eff = set(), 0.0, 0, 0, 0.0
+    for r in results:
+        key = r.group or (r.name,)
+        if key in seen:
+            continue
+        seen.add(key)
+        st = r.stats
+        scale = st["n_effective"] / st["n_samples"]
+        ll += scale * st["log_likelihood"]
+        k += st["n_parameters"] + 1
+        n += st["n_samples"]
+        n_eff += st["n_effective"]
+    return dict(log_likelihood=ll, k=k, n=n, n_effective=n_eff,
+                aic=2 * k - 2 * ll, bic=k * math.log(n_eff) - 2 * ll)
+
+
+def compare(simple_results, rich_results, simple_label="simple", rich_label="rich") -> dict:
+    """The comparison report of two fits of the same traces (see module docstring)."""
+    a, b = _information(simple_results), _information(rich_results)
+    lr = 2 * (b["log_likelihood"] - a["log_likelihood"])
+    dk = b["k"] - a["k"]
+    p = float(chi2_law.sf(max(lr, 0.0), dk)) if dk > 0 else float("nan")
+    d_aic, d_bic = a["aic"] - b["aic"], a["bic"] - b["bic"]
+    rich_ok = all(r.converged for r in rich_results)
+    use_rich = d_bic > BIC_MARGIN
+    choice = rich_label if use_rich else simple_label
+    why = (f"delta BIC = {d_bic:.1f} > {BIC_MARGIN:g}: the data ask for the extra parameters"
+           if use_rich else
+           f"delta BIC = {d_bic:.1f} <= {BIC_MARGIN:g}: the extra parameters are not needed")
+    report = [
+        f"{simple_label}: log-likelihood {a['log_likelihood']:.2f}, k = {a['k']}, "
+        f"AIC {a['aic']:.1f}, BIC {a['bic']:.1f}",
+        f"{rich_label}: log-likelihood {b['log_likelihood']:.2f}, k = {b['k']}, "
+        f"AIC {b['aic']:.1f}, BIC {b['bic']:.1f}"
+        + ("" if rich_ok else " (fit not converged: its likelihood is a lower bound)"),
+        f"likelihood ratio {lr:.2f} on {dk} extra parameter(s), nominal p = {p:.3g} "
+        "(boundary: a guide only)",
+        f"decision: {choice} ({why})",
+    ]
+    return dict(simple=simple_label, rich=rich_label, likelihood_ratio=lr, extra_parameters=dk,
+                p_value_nominal=p, delta_aic=d_aic, delta_bic=d_bic, bic_margin=BIC_MARGIN,
+                choice=choice, rich_converged=rich_ok, report=report,
+                simple_information=a, rich_information=b)
+
+
+def compare_models(traces, *, simple=None, rich=None, tau_start=1.0, **fit_kwargs):
+    """Fit the default and a richer model to the same traces and compare them.
+
+    Args:
+        traces: the traces (fitted separately, or jointly with ``shared=`` in ``fit_kwargs``).
+        simple: the default :class:`ModelSpec` (default: the traces' drive, elastic half-space).
+        rich: the richer spec (default: ``simple`` with a viscoelastic solid).
+        tau_start: the richer model's start for τ, in units of t_c; its other parameters start
+            at the simple fit's optimum (E0/E∞ at 1.2).
+        fit_kwargs: passed to :func:`fitting.fit_traces`.
+    Returns (simple results, rich results, comparison dict); the dict is also in each result's
+    ``stats["comparison"]``.
+    """
+    if simple is None:
+        drive = _model.drive_of(traces[0], fit_kwargs.pop("drive", None))
+        simple = _model.ModelSpec(drive=drive, fit_offset=fit_kwargs.pop("fit_offset", True),
+                                  layer=fit_kwargs.pop("layer", None))
+    rich = dataclasses.replace(simple, viscoelastic=True) if rich is None else rich
+    base = fit_traces(traces, spec=simple, **fit_kwargs)
+    starts = []
+    for r in base:
+        values = {n: r.values.get(n) for n in rich.names}
+        if rich.viscoelastic and not simple.viscoelastic:
+            values.update(stiffening=1.2, relaxation_time=tau_start * r.scales.time_scale)
+        starts.append(Start(values, (f"from the {simple.substrate_label()} fit; E0/Einf = 1.2, "
+                                     f"tau = {tau_start:g} t_c",)))
+    richer = fit_traces(traces, spec=rich, starts=starts, **fit_kwargs)
+    comparison = compare(base, richer, simple.substrate_label(), rich.substrate_label())
+    for r in base + richer:
+        r.stats["comparison"] = comparison
+    return base, richer, comparison

@@ -1,0 +1,195 @@
+"""Fit reports: the JSON summary and a text report in the style of lmfit's ``fit_report``."""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+from ._fit import FitResult
+
+#: (JSON key, display unit, display scale) of each parameter; the offset's depends on the channel.
+_UNITS = {
+    "E_star": ("E_star_Pa", "MPa", 1e6),
+    "viscosity": ("viscosity_Pa_s", "Pa s", 1.0),
+    "z0": ("z0_m", "um", 1e-6),
+    "stiffening": ("stiffening", "E0/Einf", 1.0),
+    "relaxation_time": ("relaxation_time_s", "s", 1.0),
+}
+_TRUE_KEYS = {
+    "E_star": "true_E_star_Pa",
+    "viscosity": "true_viscosity_Pa_s",
+    "z0": "true_z0_m",
+    "stiffening": "true_stiffening",
+    "relaxation_time": "true_relaxation_time_s",
+}
+
+
+def units(res: FitResult, name: str):
+    """(JSON key, display unit, display scale) of parameter ``name``."""
+    if name == "offset":
+        return ("offset_N", "mN", 1e-3) if res.spec.response == "force" else (
+            "offset_m", "um", 1e-6)
+    return _UNITS[name]
+
+
+def truth(res: FitResult) -> dict:
+    """True values from a synthetic trace's header, where present."""
+    out = {}
+    for name, key in _TRUE_KEYS.items():
+        if name in res.values and key in res.metadata:
+            try:
+                out[name] = float(res.metadata[key])
+            except (TypeError, ValueError):
+                pass
+    return out
+
+
+def _finite(x):
+    return None if x is None or not np.isfinite(x) else float(x)
+
+
+def result_to_dict(res: FitResult) -> dict:
+    """A JSON-ready summary of a fit (SI units; keys as documented in data/README.md)."""
+    names = res.spec.names
+    resp_unit = "N" if res.spec.response == "force" else "m"
+    out = {"trace": res.name}
+    for n in names:
+        out[units(res, n)[0]] = res.values[n]
+    out["stderr"] = {units(res, n)[0]: res.stderr[n] for n in names}
+    out["correlation"] = {
+        "names": list(names),
+        "matrix": [[_finite(x) for x in row] for row in res.correlation],
+    }
+    parts = res.stats.get("error_parts", {})
+    out["error_budget"] = {
+        part: {units(res, n)[0]: v for n, v in errs.items()} for part, errs in parts.items()
+    }
+    out.update(
+        model={"drive": res.spec.drive, "substrate": res.spec.substrate_label(),
+               "response": res.spec.response},
+        shared=list(res.shared),
+        group=list(res.group),
+        beta=res.beta,
+        z0_over_dc=res.z0_over_dc,
+        indent_m=res.scales.indent,
+        speed_m_s=res.scales.speed,
+        time_scale_s=res.scales.time_scale,
+        radius_m=res.scales.radius,
+        **{f"rms_residual_{resp_unit}": res.rms_residual},
+        statistics={k: v for k, v in res.stats.items() if k != "error_parts"},
+        converged=res.converged,
+        identifiable=res.identifiable,
+        condition_number=res.stats.get("condition"),
+        n_iterations=res.n_iterations,
+        n_model_runs=res.n_model_runs,
+        method=res.method,
+        wall_s=res.wall_s,
+        flags=list(res.flags),
+        start={**{units(res, n)[0]: res.start.values[n] for n in names},
+               "notes": list(res.start.notes)},
+        metadata=dict(res.metadata),
+    )
+    nu = None
+    try:
+        nu = float(res.metadata.get("poisson_ratio"))
+    except (TypeError, ValueError):
+        nu = None
+    if nu is not None and -1 < nu <= 0.5:
+        out["E_Pa"] = res.E_star * (1 - nu**2)
+        out["stderr"]["E_Pa"] = res.stderr["E_star"] * (1 - nu**2)
+    true = truth(res)
+    if true:
+        out["vs_true"] = {
+            units(res, n)[0]: {
+                "true": v, "relative_error": res.values[n] / v - 1,
+                "z_score": (res.values[n] - v) / res.stderr[n] if res.stderr[n] > 0 else None,
+            }
+            for n, v in true.items()
+        }
+    if "comparison" in res.stats:
+        out["comparison"] = res.stats["comparison"]
+    return out
+
+
+def _value_line(res, n):
+    key, unit, scale = units(res, n)
+    v, e = res.values[n] / scale, res.stderr[n] / scale
+    rel = f"({100 * e / abs(v):.2f}%)" if v else ""
+    tag = " (shared)" if n in res.shared else ""
+    start = res.start.values[n] / scale
+    line = (f"    {n:<16s} = {v:<11.6g} +/- {e:<10.3g} {rel:<9s} {unit:<8s} "
+            f"(init = {start:.5g}){tag}")
+    t = truth(res).get(n)
+    if t is not None and res.stderr[n] > 0:
+        line += f"  [true {t / scale:.5g}, z = {(res.values[n] - t) / res.stderr[n]:+.2f}]"
+    return line
+
+
+def fit_report(res: FitResult, min_correl: float = 0.1) -> str:
+    """A text report: fit statistics, variables with errors and starts, correlations, flags."""
+    st = res.stats
+    names = [n for n in res.spec.names if res.stderr.get(n, 0) > 0 or n != "offset"]
+    lines = [
+        f"[[Model]] {os.path.basename(res.name) or 'trace'}",
+        f"    drive: {res.spec.drive}; substrate: {res.spec.substrate_label()}; "
+        f"response: {res.spec.response}",
+        "[[Fit Statistics]]",
+        f"    # fitting method   = {res.method}",
+        f"    # function evals   = {res.n_model_runs}",
+        f"    # iterations       = {res.n_iterations}",
+        f"    # data points      = {st['n_samples']}",
+        f"    # variables        = {st['n_parameters']}",
+        f"    chi-square         = {st['chi2']:.6g}",
+        f"    reduced chi-square = {st['reduced_chi2']:.6g}",
+        f"    Akaike info crit   = {st['aic']:.6g}",
+        f"    Bayesian info crit = {st['bic']:.6g}",
+        f"    residual lag-1 autocorrelation = {st['autocorrelation_lag1']:.3g} "
+        f"(Durbin-Watson {st['durbin_watson']:.3g})",
+        f"    noise model        = {st['noise_model']}"
+        + (f" (effective samples {st['n_effective']:.0f})" if st["noise_model"] == "ar1" else ""),
+        f"    converged          = {res.converged}: {res.flags[0]}",
+    ]
+    if res.group:
+        lines.append(f"    joint fit of       = {', '.join(res.group)}")
+    lines.append("[[Variables]]")
+    for n in names:
+        lines.append(_value_line(res, n))
+    lines.append(f"    (beta = {res.beta:.5g}, z0/dc = {res.z0_over_dc:.5g}, d_c = "
+                 f"{res.scales.indent * 1e6:.5g} um, t_c = {res.scales.time_scale:.4g} s)")
+    parts = st.get("error_parts", {})
+    if parts:
+        lines.append("[[Error budget]] (1-sigma, per source; total = sqrt(noise^2 + solver^2))")
+        for part, errs in parts.items():
+            cells = []
+            for n in names:
+                if n in errs:
+                    _, unit, scale = units(res, n)
+                    cells.append(f"{n} {errs[n] / scale:.3g}")
+            lines.append(f"    {part:<8s}: " + ", ".join(cells))
+    lines.append(f"[[Correlations]] (unreported correlations are < {min_correl:.3f})")
+    pairs = []
+    idx = {n: i for i, n in enumerate(res.spec.names)}
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            c = res.correlation[idx[names[a]], idx[names[b]]]
+            if np.isfinite(c) and abs(c) >= min_correl:
+                pairs.append((abs(c), f"    C({names[a]}, {names[b]}) = {c:+.4f}"))
+    lines += [p for _, p in sorted(pairs, reverse=True)]
+    lines.append("[[Start values]]")
+    lines += [f"    {note}" for note in res.start.notes]
+    extra = [f for f in res.flags[1:]]
+    if extra:
+        lines.append("[[Flags]]")
+        lines += [f"    {f}" for f in extra]
+    if "comparison" in st:
+        lines.append("[[Model comparison]]")
+        lines += [f"    {x}" for x in st["comparison"]["report"]]
+    return "\n".join(lines)
+
+
+def short_value(res: FitResult, n: str) -> str:
+    _, unit, scale = units(res, n)
+    v, e = res.values[n] / scale, res.stderr[n] / scale
+    return f"{v:.4g} ± {e:.2g} {unit}" if not math.isnan(e) else f"{v:.4g} {unit}"

@@ -1,0 +1,146 @@
+r"""Uncertainties and statistics of a least-squares fit: what the reported errors contain.
+
+At the optimum x̂ with residuals r (in units of each trace's noise estimate) and Jacobian J:
+
+* **Noise, white** (the textbook errors): Cov_white = s² (JᵀJ)⁻¹, s² = Σr²/(n - p) (the reduced
+  χ²). Valid when the noise is independent from sample to sample.
+* **Noise, AR(1)** (correlated noise, a load cell's low-pass filter or drift): per trace the
+  lag-1 autocorrelation ρ̂ of the residuals defines the correlation matrix R_ij = ρ̂^|i-j|, and
+  the covariance of the least-squares estimate is the sandwich
+  Cov_AR1 = s² (JᵀJ)⁻¹ (Jᵀ R J) (JᵀJ)⁻¹ (exact for AR(1) noise; R⁻¹ is tridiagonal, so R J is a
+  banded solve). For slowly varying J this is Cov_white × (1+ρ)/(1-ρ): the effective number of
+  independent samples is n_eff = n (1-ρ)/(1+ρ). With ``noise="auto"`` the report uses it when
+  the residuals are not white: |ρ̂| > 3/√n (three standard errors of ρ̂ under white noise).
+* **Solver error** (the model is a discretisation): the error of the model response at the
+  optimum is estimated as the solver estimates its own (``lubjax.Result.force_error``): the nested
+  coarse mesh (every other node, second order: error ≈ (y_coarse - y)/3) plus the time error from
+  the coarse mesh at 8·rtol (global error ∝ rtol^{2/3}: ≈ (y_coarse,8rtol - y_coarse)/3). This
+  signed error m shifts the optimum by δx = -(JᵀJ)⁻¹Jᵀm; it is the same in every noise draw, a
+  systematic error, so it enters as Cov_solver = δx δxᵀ. The reported covariance is
+  Cov_noise + Cov_solver: if the estimate is right, the mean square of (x̂ - x_true) over noise
+  draws equals its diagonal exactly (bias² + variance).
+
+Identifiability: any |correlation| > ``MAX_CORRELATION`` or a correlation-matrix condition number
+above ``MAX_CONDITION`` flags the fit ``identifiable=False``.
+
+Model comparison (:func:`information`): Gaussian log-likelihood with the noise scale profiled
+out, ℓ = -(n/2) ln(Σr²/n) + const, AIC = 2k - 2ℓ, BIC = k ln n - 2ℓ (k = p + 1).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.linalg import solve_banded
+
+MAX_CORRELATION = 0.999
+MAX_CONDITION = 1e8
+NOISE_MODELS = ("auto", "white", "ar1")
+#: |ρ̂| above this many standard errors (1/√n) of a white-noise ρ̂ means "not white".
+WHITE_THRESHOLD = 3.0
+
+
+def lag1(r: np.ndarray) -> float:
+    """Lag-1 autocorrelation of a residual sequence."""
+    r = r - np.mean(r)
+    den = float(r @ r)
+    return float(r[1:] @ r[:-1]) / den if den > 0 else 0.0
+
+
+def ar1_correlated(J: np.ndarray, rho: float) -> np.ndarray:
+    """R J for R_ij = ρ^|i-j| (AR(1) correlation), by the tridiagonal R⁻¹:
+    (1 - ρ²) R⁻¹ = tridiag(-ρ; 1, 1 + ρ², ..., 1 + ρ², 1; -ρ)."""
+    n = J.shape[0]
+    if n < 2 or rho == 0.0:
+        return J.copy()
+    ab = np.zeros((3, n))
+    ab[0, 1:] = -rho
+    ab[1, :] = 1 + rho**2
+    ab[1, 0] = ab[1, -1] = 1.0
+    ab[2, :-1] = -rho
+    return solve_banded((1, 1), ab / (1 - rho**2), J)
+
+
+def _blocks(sizes):
+    """(start, n_real) of each trace's block in the stacked residuals (blocks are padded)."""
+    out, start = [], 0
+    for length, n in sizes:
+        out.append((start, n))
+        start += length
+    return out
+
+
+def summarise(r, J, sizes, labels, *, noise="auto", solver_error=None) -> dict:
+    """Covariance of x̂ and the fit statistics (see module docstring).
+
+    Args:
+        r, J: stacked residuals and Jacobian of one problem (trace blocks, each padded).
+        sizes: (block length, real samples) per trace.
+        labels: names of x's components.
+        noise: "auto", "white" or "ar1".
+        solver_error: the signed error of the model in residual units (same shape as r), or None.
+    """
+    blocks = _blocks(sizes)
+    rows = np.concatenate([np.arange(s, s + n) for s, n in blocks])
+    rr, JJ = r[rows], J[rows]
+    n, p = rr.size, JJ.shape[1]
+    dof = max(n - p, 1)
+    chi2 = float(rr @ rr)
+    s2 = chi2 / dof
+    A = JJ.T @ JJ
+    flags = []
+    try:
+        inv = np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        inv = np.full_like(A, np.nan)
+        flags.append("JᵀJ is singular: no standard errors")
+    cov_white = s2 * inv
+    rhos = [lag1(r[s : s + k]) for s, k in blocks]
+    rho = float(np.sum([k * q for (_, k), q in zip(blocks, rhos)]) / n)
+    correlated = abs(rho) > WHITE_THRESHOLD / math.sqrt(n)
+    use = noise if noise != "auto" else ("ar1" if correlated else "white")
+    parts = {"white": cov_white}
+    if use == "ar1":
+        meat = np.zeros_like(A)
+        for (s, k), q in zip(blocks, rhos):
+            Jb = J[s : s + k]
+            meat += Jb.T @ ar1_correlated(Jb, float(np.clip(q, -0.99, 0.99)))
+        cov_noise = s2 * inv @ meat @ inv
+        parts["ar1"] = cov_noise
+    else:
+        cov_noise = cov_white
+    if correlated and use == "white":
+        flags.append(f"residuals are not white (lag-1 autocorrelation {rho:.3g}); the white-noise "
+                     "errors are too small: use noise='ar1'")
+    cov = cov_noise
+    if solver_error is not None:
+        shift = -inv @ (JJ.T @ solver_error[rows])
+        cov_solver = np.outer(shift, shift)
+        parts["solver"] = cov_solver
+        cov = cov_noise + cov_solver
+    parts["total"] = cov
+    se = np.sqrt(np.abs(np.diag(cov)))
+    corr = cov / np.outer(se, se)
+    off = np.abs(corr - np.eye(p))
+    dg = np.sqrt(np.abs(np.diag(A)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cond = float(np.linalg.cond(A / np.outer(dg, dg))) if np.all(dg > 0) else math.inf
+    n_eff = n * (1 - rho) / (1 + rho) if use == "ar1" else float(n)
+    stats = dict(
+        n_samples=int(n), n_parameters=int(p), dof=int(dof), chi2=chi2, reduced_chi2=s2,
+        autocorrelation_lag1=rho, durbin_watson=float(np.sum(np.diff(rr) ** 2) / max(chi2, 1e-300)),
+        noise_model=use, n_effective=float(n_eff), **information(chi2, n, p),
+    )
+    return dict(
+        covariance=cov, parts=parts, stats=stats, labels=list(labels), sizes=list(sizes),
+        max_correlation=float(np.nanmax(off)) if p > 1 else 0.0, condition=cond, flags=flags,
+        correlation=corr,
+    )
+
+
+def information(chi2: float, n: int, p: int) -> dict:
+    """Profile log-likelihood (up to a constant common to models of the same data), AIC, BIC."""
+    k = p + 1  # the noise scale
+    loglik = -0.5 * n * math.log(max(chi2, 1e-300) / n)
+    return dict(log_likelihood=loglik, aic=2 * k - 2 * loglik, bic=k * math.log(n) - 2 * loglik)
