@@ -72,7 +72,7 @@ def _parser() -> Parser:
     r.add_argument(
         "--rtol", type=positive_float, default=None,
         help="accuracy: local error tolerance of each step, and the mesh (Settings.rtol, "
-        "default 3e-4)",
+        "default 1e-4)",
     )
     r.add_argument(
         "--max-steps", type=int, default=None, help="attempted-step budget (Settings.max_steps)"
@@ -134,7 +134,7 @@ def _add_material(p):
 
 def _add_accuracy(p):
     p.add_argument("--rtol", type=positive_float, default=None,
-                   help="accuracy: local error tolerance (Settings.rtol, default 3e-4)")
+                   help="accuracy: local error tolerance (Settings.rtol, default 1e-4)")
     p.add_argument("--max-steps", type=int, default=None,
                    help="attempted-step budget (Settings.max_steps)")
     p.add_argument("--out", help="write results as JSON here")

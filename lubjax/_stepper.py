@@ -104,7 +104,7 @@ class Tolerance:
         relative to max(|F̄|, force_floor × its peak so far).
     """
 
-    rtol: float = 3e-4
+    rtol: float = 1e-4
     atol: float = 1e-9
     initial_step: float = 1e-5
     order: int = 2

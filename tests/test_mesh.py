@@ -57,4 +57,4 @@ def test_relax_refines_its_mesh_by_default():
     auto = lubjax.relax(100.0, 0.5, 1.5, settings=lubjax.Settings(**coarse))
     plain = lubjax.relax(100.0, 0.5, 1.5, settings=lubjax.Settings(**coarse, contact_radius=None))
     assert auto.r.size > plain.r.size
-    assert np.min(np.diff(auto.r)) == pytest.approx(0.05 / 7, rel=0.1)
+    assert np.min(np.diff(auto.r)) == pytest.approx(0.05 / 14, rel=0.1)  # Settings.rim_refinement

@@ -138,13 +138,18 @@ def test_corners_of_the_parameter_box_to_a_million(beta, z0):
         assert res.force[-1] < 1e-9 * peak
 
 
+@pytest.mark.slow
 def test_error_estimate_bounds_the_error():
-    """Result.force_error against a much finer, tighter run: its maximum bounds the maximum
-    error. (Pointwise it does not yet bound the error at 95 % of the times: 46-100 % in
-    benchmarks/accuracy.py, README; that target of the issue is open, so not asserted here.)"""
+    """Result.force_error against a converged run (rtol 1e-7, dr = 0.005: the accuracy table's
+    reference settings, benchmarks/accuracy.py): it bounds the error pointwise at >= 95 % of the
+    step times where the error is above 1e-6 of the peak, and its maximum is within 10x of the
+    largest error (not an empty bound)."""
+    reference = lubjax.Settings(rtol=1e-7, atol=1e-16, dr=0.005, mesh_growth=1.04,
+                                length=1000.0, error_estimate=False)  # fmt: skip
     for beta, z0 in [(10.0, 0.9), (1000.0, 1.11)]:
         res = lubjax.relax(beta, z0, 5.0)
-        ref = lubjax.relax(beta, z0, 5.0, settings=lubjax.Settings(
-            rtol=1e-6, dr=0.007, mesh_growth=1.02, length=1000.0, error_estimate=False))
+        ref = lubjax.relax(beta, z0, 5.0, settings=reference)
         err = np.abs(res.force - ref.at(res.t))
+        significant = err > 1e-6 * ref.force.max()
+        assert np.mean(res.force_error[significant] >= err[significant]) >= 0.95
         assert np.max(err) <= np.max(res.force_error) <= 10 * np.max(err)
