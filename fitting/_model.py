@@ -66,16 +66,17 @@ from ._io import Trace
 DRIVES = ("travel", "spring", "force")
 LAYER_BASES = ("bonded", "frictionless")
 
-#: Accuracy of the model inside fits: the solver's own error control at rtol = 1e-3 (143
-#: nodes; the solver's default 3e-4 has 271). Why not tighter: the model's error at the optimum
-#: is estimated and folded into the reported errors (fitting._stats), and at 1 % load-cell noise
-#: it stays under half a standard error (benchmarks/fit_coverage.py: rms z 1.0-1.1), while a run
-#: costs a quarter. The force is held to rtol relative to itself only down to 1e-5 of its peak
+#: Accuracy of the model inside fits: the solver's own error control at rtol = 3e-4 (198
+#: nodes; the solver's default 1e-4 has 271). At 1e-3 the model of paper_dc140 at the true
+#: parameters was 4e-3 of the peak off where the lagged stage stops (a kink in the travel the
+#: steps must resolve), rms 2.7e-4; at 3e-4 1.9e-3 and 1.2e-4 (tests/test_fitting.py). The
+#: model's remaining error at the optimum is estimated and folded into the reported errors
+#: (fitting._stats). The force is held to rtol relative to itself only down to 1e-5 of its peak
 #: (a load cell's noise is ≥ 1e-3 of it), else the decaying hold of z̄0 > 1 traces chases the
 #: quantisation of the recorded travel through 10⁴ steps. The attempt budget is 5000 (a
 #: bundled trace takes ≈ 300): the step record is max_steps long, and a batch of fits carries
 #: one per trace and tangent.
-FIT_SETTINGS = lubjax.Settings(rtol=1e-3, force_floor=1e-5, max_steps=5000)
+FIT_SETTINGS = lubjax.Settings(rtol=3e-4, force_floor=1e-5, max_steps=5000)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -112,7 +112,7 @@ def test_residual_jacobian_is_forward_mode_and_consistent(spec):
 
 def test_model_matches_an_independent_fine_solver():
     """The fit's model at the true parameters against the clean trace of the fine generator:
-    rms within 3e-4 of the peak, every sample within 3e-3 (measured 1.4e-4 and 2.2e-3, the
+    rms within 3e-4 of the peak, every sample within 3e-3 (measured 1.2e-4 and 1.9e-3, the
     largest where the lagged stage stops: the 100 Hz record of the travel, monotone-cubic
     interpolated, is all the model knows of the motion between samples)."""
     tr = _trace("paper_dc140", clean=True)
