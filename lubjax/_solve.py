@@ -48,8 +48,9 @@ DEFAULT_RTOL = 1e-4
 
 def _mesh_from_tolerance(rtol: float) -> tuple[float, float, float]:
     """(dr, mesh growth, L̄) for a tolerance, so that the spatial error stays below the time
-    error. The force's spatial error is ∝ dr^{1.7} and ∝ (growth - 1)² (benchmarks/mesh_rule.py)
-    while the global time error is ∝ rtol^{2/3}: both mesh sizes ∝ rtol^{1/4} keeps the two in
+    error. The force's spatial error is ∝ dr^{1.7-2} (tests/test_convergence.py fits the order)
+    and ∝ (growth - 1)², while the global time error is ∝ rtol^{2/3}
+    (tests/test_stepper.py): both mesh sizes ∝ rtol^{1/4} keeps the two in
     step (a rule ∝ √rtol refined far too fast below 1e-4: 52 s for a t̄ ≤ 5 run at 1e-5). The
     domain truncation ≈ 4z̄/L̄² of the force (MODEL.md) is kept below rtol/8 for z̄ ≤ 1."""
     scale = (rtol / DEFAULT_RTOL) ** 0.25
