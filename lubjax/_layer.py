@@ -83,8 +83,8 @@ _TAIL = 1e-17
 #: Most k̄ nodes we accept (≈ 10 s on these machines); past it the layer is too thin for the mesh.
 MAX_NODES = 150_000
 
-#: k̄ nodes per chunk of the A @ B product (N × 4096 doubles ≈ 9 MB per array at N = 271).
-_CHUNK = 4096
+#: Entries (N × k̄ nodes) per chunk of the A @ B product: ≈ 9 MB per work array, whatever N.
+_CHUNK_ENTRIES = 1 << 20
 
 #: Power series of Ψ(x) = ∫₀^x t J₁(t) dt = Σ_m (-1)^m x^{2m+3} / ((2m+3) 2^{2m+1} m! (m+1)!),
 #: used for x < 2, where its 16 terms are exact to rounding.
@@ -238,10 +238,11 @@ def layer_correction(mesh: Mesh, thickness: float, poisson: float, interface: st
     k, wk = k_nodes(mesh, thickness, poisson, interface)
     n = r.size
     out = np.zeros((n, n))
-    for start in range(0, k.size, _CHUNK):
-        kc = k[start:start + _CHUNK]
+    chunk = max(256, _CHUNK_ENTRIES // n)
+    for start in range(0, k.size, chunk):
+        kc = k[start:start + chunk]
         phi, a = hat_transforms(r, kc)
-        weight = wk[start:start + _CHUNK] * transfer_minus_one(kc * thickness, poisson, interface)
+        weight = wk[start:start + chunk] * transfer_minus_one(kc * thickness, poisson, interface)
         out += a @ (weight[:, None] * phi.T)
     out *= 4.0 / np.pi
     return out
