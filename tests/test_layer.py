@@ -123,7 +123,7 @@ def test_entries_match_real_space_quadrature(thickness, nu, interface):
     scale = np.abs(lubjax.influence_matrix(mesh)).max()
     for i, j in [(0, 0), (4, 4), (4, 5), (0, n - 1), (n - 1, 2), (n - 2, n - 1)]:
         ref = _real_space_entry(r, i, j, thickness, nu, interface)
-        assert abs(delta[i, j] - ref) <= 1e-8 * scale, (i, j, delta[i, j], ref)
+        assert abs(delta[i, j] - ref) <= 1e-11 * scale, (i, j, delta[i, j], ref)  # measured 2e-14
 
 
 @pytest.mark.parametrize("interface", ["bonded", "frictionless"])
