@@ -80,7 +80,7 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(_PANEL_POINTS)
 #: |C(t) - 1| below this is dropped (the integrand's tail beyond t_max).
 _TAIL = 1e-17
 
-#: Most k̄ nodes we accept (≈ 10 s on these machines); past it the layer is too thin for the mesh.
+#: Most k̄ nodes we accept (≈ 15-25 s on 2 shared cores); past it the layer is too thin for the mesh.
 MAX_NODES = 150_000
 
 #: Entries (N × k̄ nodes) per chunk of the A @ B product: ≈ 9 MB per work array, whatever N.
