@@ -17,9 +17,10 @@ u_x = U(z) sin kx, u_z = W(z) cos kx, U, W ∈ span{e^{±kz}, z e^{±kz}}, with 
     bonded:        C(t) = (2κ sinh 2t - 4t) / (2κ cosh 2t + 4t² + κ² + 1),
     frictionless:  C(t) = (cosh 2t - 1) / (sinh 2t + 2t),                          (L2)
 
-the first as in Chandler & Vella, Proc. R. Soc. A 476 (2020) 20200551 (the classical layer
-kernels, e.g. Johnson, Contact Mechanics §5.9 for the thin limits); tests/test_layer.py solves
-the 4×4 boundary-value problem numerically and checks both. Thin limits (t → 0):
+the first the classical bonded-layer kernel (as used by Chandler & Vella, Proc. R. Soc. A 476,
+2020; thin limits as in Johnson, Contact Mechanics, 1985; citations not re-read here). Both were
+derived here (sympy) and tests/test_layer.py solves the 4×4 boundary-value problem numerically
+against them. Thin limits (t → 0):
 
 * bonded, ν < ½:  C ≈ t (1-2ν)/(2(1-ν)²): w = -p H (1-2ν)(1+ν)/((1-ν)E), uniaxial strain
   (a Winkler foundation of modulus λ + 2G);
