@@ -14,7 +14,8 @@
    peak, over t̄ ∈ [0, 5], with the 1 % contour; the paper's samples (H = 5 mm, R = 2 mm,
    d_c = 126-154 μm, β ≈ 41-68) are marked.
 
-Outputs: benchmarks/out/substrate_maps.md and benchmarks/out/substrate_maps.png.
+Outputs: benchmarks/out/substrate_maps.md and benchmarks/out/substrate_maps.png
+(substrate_maps_<only>.md/.png with --only).
 """
 
 from __future__ import annotations
@@ -166,7 +167,7 @@ def main(argv=None):
             z0 = max(d["err"])
             X, Y = np.meshgrid(d["betas"], d["thick"])
             err = d["err"][z0]
-            cs = ax.contourf(X, Y, np.log10(np.maximum(err, 1e-6)),
+            cs = ax.contourf(X, Y, np.log10(np.maximum(err, 1e-6)), extend="max",
                              levels=np.arange(-5, 0.01, 0.5), cmap="viridis")  # fmt: skip
             ax.contour(X, Y, err, levels=[0.01], colors="r", linewidths=2)
             for h, b, _dc in paper_points():
@@ -180,9 +181,11 @@ def main(argv=None):
             fig.colorbar(cs, ax=ax, label="log10 max|ΔF̄|/peak")
     fig.tight_layout()
     os.makedirs(OUT, exist_ok=True)
-    png = os.path.join(OUT, "substrate_maps.png")
+    # --only writes beside the full run's files rather than over them.
+    stem = "substrate_maps" + (f"_{args.only}" if args.only else "")
+    png = os.path.join(OUT, f"{stem}.png")
     fig.savefig(png, dpi=110)
-    md = os.path.join(OUT, "substrate_maps.md")
+    md = os.path.join(OUT, f"{stem}.md")
     with open(md, "w") as f:
         f.write("\n".join(lines) + "\n")
     print("\n".join(lines))

@@ -21,6 +21,7 @@ from ._analytic import (  # noqa: E402
 from ._drives import FreeSphere, Load, Spring, Travel, as_drive, restitution  # noqa: E402
 from ._indenter import RampHold, SampledTravel  # noqa: E402
 from ._influence import force_weights, influence_matrix, kernel  # noqa: E402
+from ._layer import layer_influence_matrix, layer_thickness_bar  # noqa: E402
 from ._mesh import Mesh, graded_mesh, uniform_mesh  # noqa: E402
 from ._solve import (  # noqa: E402
     BETA_RANGE,
@@ -100,6 +101,8 @@ __all__ = [
     "hertz_pressure",
     "influence_matrix",
     "kernel",
+    "layer_influence_matrix",
+    "layer_thickness_bar",
     "make_plan",
     "plane_strain_modulus",
     "reduced_radius",

@@ -36,6 +36,7 @@ DESCRIPTION = (
 )
 EPILOG = EXIT_EPILOG.format(failed="solver error, or an output could not be written")
 SI_NAMES = ("E_star", "E", "poisson", "viscosity", "radius", "speed", "indent", "gap")
+LAYER_BASES = ("bonded", "frictionless")
 
 
 def _parser() -> Parser:
@@ -66,6 +67,17 @@ def _parser() -> Parser:
     si.add_argument("--speed", type=float, help="approach speed v0 [m/s]")
     si.add_argument("--indent", type=float, help="travel d_c [m]")
     si.add_argument("--gap", type=float, help="initial gap z0 [m]")
+    sub_ = r.add_argument_group("substrate")
+    sub_.add_argument("--substrate", choices=("halfspace", "layer"), default="halfspace",
+                      help="elastic half-space (default) or a layer of thickness --thickness on "
+                      "a rigid base (SI mode)")
+    sub_.add_argument("--thickness", type=positive_float,
+                      help="layer thickness H [m] (H/sqrt(R d_c) in the solver's units)")
+    sub_.add_argument("--layer-base", choices=LAYER_BASES, default=None,
+                      help="layer on its rigid base: bonded (default) or frictionless")
+    sub_.add_argument("--layer-poisson", type=float, default=None,
+                      help="Poisson ratio of the layer in (-1, 0.5] (default: --poisson if "
+                      "given, else 0.5)")
     r.add_argument(
         "--dr", type=positive_float, default=None, help="fine-zone mesh spacing (Settings.dr)"
     )
@@ -377,6 +389,37 @@ def _si_test(args):
     return test
 
 
+def _layer(args, test, settings):
+    """The substrate from --substrate/--thickness/--layer-base/--layer-poisson (None: the
+    half-space); every mistake a UsageError before anything is computed."""
+    from ._layer import k_nodes, layer_thickness_bar
+    from ._substrate import Layer
+
+    if args.substrate != "layer":
+        given = [f"--{n.replace('_', '-')}" for n in ("thickness", "layer_base", "layer_poisson")
+                 if getattr(args, n) is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)}: only with --substrate layer")
+        return None
+    if args.thickness is None:
+        raise UsageError("--substrate layer needs --thickness H (metres)")
+    if test is None:
+        raise UsageError("--thickness is in metres: give the SI parameters (--E-star, "
+                         "--viscosity, --radius, --speed, --indent, --gap), not --beta/--z0")
+    nu = args.layer_poisson
+    if nu is None:
+        nu = args.poisson if args.poisson is not None else 0.5
+    if not (math.isfinite(nu) and -1.0 < nu <= 0.5):
+        raise UsageError(f"--layer-poisson must be in (-1, 0.5], got {nu:g}")
+    thickness = layer_thickness_bar(args.thickness, test.radius, test.indent)
+    layer = Layer(thickness, nu, args.layer_base or "bonded")
+    try:  # the matrix's cost depends on the mesh length only: refuse a too thin layer now
+        k_nodes(settings.mesh(), layer.thickness, layer.poisson, layer.interface)
+    except ValueError as exc:
+        raise UsageError(f"--thickness {args.thickness:g} m: {exc}") from None
+    return layer
+
+
 def _relax(args) -> int:
     from ._solve import Settings, check_parameters, relax
 
@@ -399,9 +442,11 @@ def _relax(args) -> int:
     given = [("dr", args.dr), ("rtol", args.rtol), ("order", args.order),
              ("max_steps", args.max_steps)]
     settings = Settings(**{k: v for k, v in given if v is not None})
+    layer = _layer(args, test, settings)
     profile_times = [t for t in (0.25, 0.5, 1.0, 2.0, t_end) if t <= t_end]
     prepare_outputs(outputs)
-    res = relax(beta, z0, t_end, settings=settings, profile_times=profile_times)
+    res = relax(beta, z0, t_end, settings=settings, profile_times=profile_times,
+                substrate=layer)
     out = {
         "beta": beta,
         "z0": z0,
@@ -418,6 +463,9 @@ def _relax(args) -> int:
         "rejected_steps": res.rejected,
         "ok": res.ok,
         "settings": dataclasses.asdict(settings),
+        "substrate": {"kind": "halfspace"} if layer is None else {
+            "kind": "layer", "thickness_m": args.thickness, "thickness_bar": layer.thickness,
+            "poisson": layer.poisson, "base": layer.interface},
     }
     if test:
         out.update(
@@ -431,6 +479,9 @@ def _relax(args) -> int:
                 "pressure_Pa": test.pressure_scale,
             },
         )
+    if layer is not None:
+        print(f"substrate: {layer.interface} layer H = {args.thickness:g} m "
+              f"(H/sqrt(R d_c) = {layer.thickness:.4g}), poisson {layer.poisson:g}")
     print(
         f"beta={beta:.4g} z0={z0:.4g}: F(t_end)={res.force[-1]:.5g}, peak F={res.force.max():.5g}, "
         f"min film={res.film_min.min():.3g}; estimated error {np.nanmax(res.force_error):.2g}; "

@@ -21,6 +21,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+import lubjax
 import lubjax._cli as lcli
 import lubjax._solve as lsolve
 from fitting import _cli as fcli
@@ -108,6 +109,7 @@ def trace(tmp_path):
 # --------------------------------------------------------------------------- lubjax relax
 
 DIM = ["relax", "--beta", "100", "--z0", "0.5"]
+LAYER = ["--substrate", "layer", "--thickness"]
 
 RELAX_USAGE = [
     # (argv, expected message fragment) -- item 5, 8, 9 of the issue
@@ -146,6 +148,16 @@ RELAX_USAGE = [
     (DIM + ["--out", "{tmp}/afile/run.json"], "cannot write in folder"),
     (DIM + ["--out", "{tmp}/r.json", "--plot", "{tmp}/../{name}/r.json"], "unknown format"),
     (DIM + ["--out", "{tmp}/r.pdf", "--plot", "{tmp}/./r.pdf"], "are the same file"),
+    # substrate options
+    (DIM + ["--thickness", "5e-3"], "--thickness: only with --substrate layer"),
+    (["relax"] + SI + ["--layer-base", "frictionless"], "--layer-base: only with --substrate"),
+    (DIM + ["--substrate", "layer"], "--substrate layer needs --thickness H (metres)"),
+    (DIM + LAYER + ["5e-3"], "--thickness is in metres: give the SI"),
+    (["relax"] + SI + LAYER + ["0"], "argument --thickness: must be a finite number > 0"),
+    (["relax"] + SI + LAYER + ["5e-3", "--layer-poisson", "0.7"], "--layer-poisson must be in"),
+    (["relax"] + SI + LAYER + ["5e-3", "--layer-base", "glued"], "--layer-base: invalid choice"),
+    (["relax"] + SI + ["--substrate", "brick"], "argument --substrate: invalid choice"),
+    (["relax"] + SI + LAYER + ["1e-6"], "1e-06 m: Layer thickness H̄ = 0.00188982 is too thin"),
 ]
 
 
@@ -241,6 +253,28 @@ def test_relax_writes_atomically_with_fake_run(tmp_path, monkeypatch, capsys):
     assert plot.read_text().lstrip().startswith("<?xml")
     assert sorted(os.listdir(out.parent)) == ["run.json", "run.svg"]
     assert os.stat(out).st_mode & 0o777 == 0o666 & ~_umask()
+
+
+def test_relax_passes_the_layer_to_the_solver(tmp_path, monkeypatch, capsys):
+    """--substrate layer: H in metres becomes H̄ = H/√(R d_c) (9.45 for the paper's sample), the
+    layer's ν defaults to --poisson, and the JSON records the substrate."""
+    seen = {}
+
+    def fake(*args, **kwargs):
+        seen.update(kwargs)
+        return _fake_result()
+
+    monkeypatch.setattr(lsolve, "relax", fake)
+    out = tmp_path / "run.json"
+    argv = (["relax", "--E", "2.94e6", "--poisson", "0.45"] + SI[2:]
+            + LAYER + ["5e-3", "--layer-base", "frictionless", "--out", str(out)])
+    assert lcli.main(argv) == 0
+    layer = seen["substrate"]
+    assert isinstance(layer, lubjax.Layer) and layer.interface == "frictionless"
+    assert layer.thickness == pytest.approx(5e-3 / np.sqrt(2e-3 * 140e-6)) and layer.poisson == 0.45
+    assert json.loads(out.read_text())["substrate"]["thickness_bar"] == pytest.approx(9.449, 1e-3)
+    assert "frictionless layer H = 0.005 m" in capsys.readouterr().out
+    assert lcli.main(DIM) == 0 and seen["substrate"] is None  # the half-space by default
 
 
 def _umask():

@@ -6,7 +6,6 @@ the fit sees the 100 Hz record at rtol 3e-4, 271 nodes), so recovery tests inclu
 discretisation error.
 """
 
-import importlib.util
 import json
 import math
 import os
@@ -23,7 +22,6 @@ DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
 PAPER = ["paper_dc126", "paper_dc140", "paper_dc154"]
 TRUE = {"E_star": "true_E_star_Pa", "viscosity": "true_viscosity_Pa_s", "z0": "true_z0_m",
         "stiffening": "true_stiffening", "relaxation_time": "true_relaxation_time_s"}
-HAS_LAYER = importlib.util.find_spec("lubjax._layer") is not None
 
 
 def _trace(stem, clean=False):
@@ -185,8 +183,6 @@ def test_fit_recovers_load_controlled_and_spring_traces(stem):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not HAS_LAYER, reason="lubjax/_layer.py (the layer's influence matrix) is "
-                    "not in this checkout yet")
 def test_a_very_thick_layer_fits_like_the_half_space():
     """H = 1 m (H̄ ≈ 2000 √(R d_c)) on a rigid base is a half-space to the model's accuracy: the
     layer path (its own influence matrix per trace) gives the half-space's fit."""
