@@ -8,9 +8,9 @@
 * ``lubjax_default``: ``lubjax.relax(β, z̄0, 1e6)`` with every default (rtol 1e-4, error
   estimate, contact refinement, ``check="raise"``) on t̄ ∈ [0, 10⁶]. Held to: finite, positive
   film, non-negative force, or a clear refusal (``SolverError`` / ``ValueError``, message in the
-  CSV). Its accuracy is checked twice: on t̄ ≤ 5 against ``relax`` at rtol 1e-6 (no estimate),
-  on the default mesh (same contact refinement) and at t̄ = 10⁶ against the long-time limit: Hertz's F̄∞ = (2π/3)(1 - z̄0)^{3/2} for z̄0 < 1,
-  F̄ → 0 (here: below 10 % of the peak) for z̄0 ≥ 1.
+  CSV). Its accuracy is checked twice: on t̄ ≤ 5 against ``relax`` at rtol 1e-6 (no estimate)
+  on the default mesh (same contact refinement), and at t̄ = 10⁶ against the long-time limit:
+  Hertz's F̄∞ = (2π/3)(1 - z̄0)^{3/2} for z̄0 < 1, F̄ → 0 (below 10 % of the peak) for z̄0 ≥ 1.
 * comparison methods on t̄ ∈ [0, 5] at fixed uniform Δt̄ on cheap meshes (stated in the figure):
   the paper scheme as published (uniform Δr̄ = 0.02, L̄ = 4; the w̄-eliminated N×N form of the
   same equations, identical up to rounding, to keep the map affordable); Newton (fully implicit
