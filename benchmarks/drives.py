@@ -13,6 +13,9 @@ restitution chart.
    sphere passes back through its starting gap, over the approach speed) against St for two
    elasticity parameters ε = 2/(3π²β), default settings against the same tight reference.
    Chart: benchmarks/out/restitution.png.
+3. Work against precision for both drives: the creep approach error and the restitution error
+   (ε = 1e-3, St = 50) at rtol ∈ {1e-2, ..., 1e-5} against the same references, with the run
+   time (compilation excluded; reported apart) — the third panel of the chart.
 
 References are cached in benchmarks/out/cache/drives_* (delete to recompute).
 """
@@ -97,7 +100,7 @@ def main(argv=None):
         "",
         "| run | max approach error / final approach | max pointwise h(0) error | steps | run_s |",
         "|---|---|---|---|---|",
-        f"| default (rtol 3e-4) | {np.max(np.abs(a - ar)) / final:.2e} | "
+        f"| default (rtol {default.rtol:g}) | {np.max(np.abs(a - ar)) / final:.2e} | "
         f"{np.max(np.abs(h / hr - 1)):.2e} | {run['steps']} | {run['run_s']:.2f} |",
         f"| reference check (rtol 3e-6) | {np.max(np.abs(ac - ar)) / final:.2e} | "
         f"{np.max(np.abs(hc / hr - 1)):.2e} | {chk['steps']} | {chk['run_s']:.1f} |",
@@ -127,6 +130,36 @@ def main(argv=None):
                          f"{c['e']:.4f} | {err:.1e} | {d['steps']} | {d['run_s']:.2f} |")
     lines.append("")
     lines.append("e = nan: no rebound to the starting gap within t̄ = 12 (x0/V units).")
+    lines.append("")
+
+    # Work against precision: the tolerance is the one knob (it also sets the mesh).
+    wp_eps, wp_st = 1e-3, 50.0
+    wp_beta = 2 / (3 * np.pi**2 * wp_eps)
+    e_ref = _cached(f"bounce_{wp_eps:g}_{wp_st:g}_ref", partial(bounce, wp_beta, wp_st, REFERENCE))
+    wp = {"creep": [], "bounce": []}
+    lines += [f"Work against precision (creep as above; bounce ε = {wp_eps:g}, St = {wp_st:g}; "
+              "run time without compilation, compile time apart):", "",
+              "| rtol | creep error / final approach | steps | run_s | compile_s | "
+              "bounce e error | steps | run_s | compile_s |", "|" + "---|" * 9]
+    for rtol in (1e-2, 1e-3, 1e-4, 1e-5):
+        print(f"work-precision rtol={rtol:g} ...", flush=True)
+        st = lubjax.Settings(rtol=rtol, error_estimate=False)
+        first = time.perf_counter()
+        creep(st)
+        compile_c = time.perf_counter() - first
+        c = creep(st)
+        compile_c -= c["run_s"]
+        first = time.perf_counter()
+        bounce(wp_beta, wp_st, st)
+        compile_b = time.perf_counter() - first
+        b = bounce(wp_beta, wp_st, st)
+        compile_b -= b["run_s"]
+        ce = np.max(np.abs(np.asarray(c["approach"]) - ar)) / final
+        be = abs(b["e"] - e_ref["e"]) / e_ref["e"]
+        wp["creep"].append((rtol, ce, c["run_s"]))
+        wp["bounce"].append((rtol, be, b["run_s"]))
+        lines.append(f"| {rtol:g} | {ce:.2e} | {c['steps']} | {c['run_s']:.2f} | {compile_c:.1f} "
+                     f"| {be:.2e} | {b['steps']} | {b['run_s']:.2f} | {compile_b:.1f} |")
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     with open(args.out, "w") as f:
         f.write("\n".join(lines) + "\n")
@@ -137,7 +170,7 @@ def main(argv=None):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    fig, ax = plt.subplots(1, 3, figsize=(16, 4))
     for eps in epsilons:
         # No rebound through the starting gap: e = 0 (open markers).
         e_def = np.nan_to_num([table[(eps, s)][0] for s in stokes], nan=0.0)
@@ -162,6 +195,15 @@ def main(argv=None):
     ax[1].set_ylabel("approach [μm]")
     ax[1].set_title(f"creep under {CREEP.load * 1e3:g} mN (t_c = {tc:g} s)")
     ax[1].legend(fontsize=8)
+    for name, marker in (("creep", "o-"), ("bounce", "s-")):
+        rtols, errs, secs = np.asarray(wp[name]).T
+        ax[2].loglog(errs, secs, marker, label=name)
+        for r, e, t in wp[name]:
+            ax[2].annotate(f"{r:g}", (e, t), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    ax[2].set_xlabel("error (creep: approach / final approach; bounce: e relative)")
+    ax[2].set_ylabel("run time [s] (compilation excluded)")
+    ax[2].set_title("work against precision (labels: rtol)")
+    ax[2].legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(os.path.join(OUT, "restitution.png"), dpi=110)
     print(f"wrote {args.out} and {os.path.join(OUT, 'restitution.png')}")
