@@ -3,7 +3,7 @@
 On CPU, JAX's ``linalg.solve`` calls the LAPACK that scipy ships (OpenBLAS). For the solver's
 (N-1)×(N-1) systems (N ≈ 200-300) threading gains nothing, and when other processes load the
 machine OpenBLAS's spinning threads oversubscribe the cores: the default run then swings from
-0.15 s to tens of seconds (issue "Error control", item 8; ``benchmarks/threads.py`` measures it).
+0.15 s to tens of seconds (issue "Error control", item 8).
 ``threadpoolctl`` (maintained by the scikit-learn developers) limits the threads of the BLAS
 libraries already loaded in this process, for the duration of a call, and restores them after.
 """
