@@ -5,7 +5,10 @@ import subprocess
 import sys
 
 import jax
+import jax.numpy as jnp
+import numpy as np
 
+from fitting import _cache
 from fitting._cache import cache_dir, enable_compilation_cache
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -53,4 +56,45 @@ def test_a_cli_fit_fills_the_cache_and_no_cache_does_not(tmp_path):
                                "2", *flag], env=env, capture_output=True, text=True)
         assert proc.returncode in (0, 1), proc.stderr
     assert len(os.listdir(tmp_path / "on")) > 0
+    assert len(os.listdir(tmp_path / "on" / "exported")) > 0  # the lowered programs too
     assert not (tmp_path / "none").exists()
+
+
+def test_an_exported_program_is_stored_once_and_reloaded_with_the_same_answer(
+        tmp_path, monkeypatch):
+    """What a second process sees: the program read back from disk (export is not called
+    again), the same values as the plain function, and a new program for a new shape."""
+
+    def f(pair, scale):
+        x, y = pair
+        return jnp.linalg.solve(x + scale * jnp.eye(x.shape[0]), y), jnp.sum(x)
+
+    fn = jax.jit(f)
+    args = ((jnp.asarray(np.random.default_rng(0).random((5, 5))), jnp.ones(5)), jnp.asarray(3.0))
+    monkeypatch.setattr(_cache, "_ENABLED", str(tmp_path))
+    monkeypatch.setattr(_cache, "_LOADED", {})
+    first = _cache.exported("test program", fn)(*args)
+    stored = os.listdir(tmp_path / "exported")
+    assert len(stored) == 1
+
+    def no_export(*a, **k):
+        raise AssertionError("exported again instead of read back")
+
+    monkeypatch.setattr(_cache, "_LOADED", {})
+    monkeypatch.setattr(jax.export, "export", no_export)
+    again = _cache.exported("test program", fn)(*args)
+    for a, b in zip(jax.tree_util.tree_leaves(first), jax.tree_util.tree_leaves(fn(*args))):
+        np.testing.assert_array_equal(a, b)
+    for a, b in zip(jax.tree_util.tree_leaves(again), jax.tree_util.tree_leaves(first)):
+        np.testing.assert_array_equal(a, b)
+    # a new shape is a new program: the failing export falls back to the plain function
+    bigger = ((jnp.eye(6), jnp.ones(6)), jnp.asarray(1.0))
+    np.testing.assert_array_equal(_cache.exported("test program", fn)(*bigger)[0], 0.5)
+    assert os.listdir(tmp_path / "exported") == stored
+
+
+def test_without_the_cache_exported_is_the_plain_function(monkeypatch):
+    monkeypatch.setattr(_cache, "_ENABLED", None)
+    calls = []
+    assert _cache.exported("x", lambda a: calls.append(a) or a + 1)(1) == 2
+    assert calls == [1]
