@@ -91,11 +91,17 @@ def _discretise(mesh: Mesh, elastic) -> Discretisation:
     )
 
 
-@jax.tree_util.register_static
+@functools.partial(
+    jax.tree_util.register_dataclass,
+    data_fields=["rtol", "atol", "initial_step", "force_floor"],
+    meta_fields=["order", "max_steps"],
+)
 @dataclasses.dataclass(frozen=True)
 class Tolerance:
-    """What the controller needs. A static pytree (no leaves): passed through ``jit`` and
-    ``vmap`` as part of the compiled function's identity.
+    """What the controller needs. A pytree: the numbers (rtol, atol, initial_step,
+    force_floor) are leaves, so a tolerance passed to ``jit`` as an argument is traced and one
+    compiled program serves every tolerance; ``order`` and ``max_steps`` shape the program and
+    are static. Closed over (as ``sweep`` and the fits do), it is a constant of the program.
 
     rtol, atol: the step's estimated local error e (film h̄ at every node, and F̄) must satisfy
         |e| ≤ atol + rtol·|value|. initial_step: the first step after t̄_start and after each
