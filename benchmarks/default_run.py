@@ -1,0 +1,91 @@
+"""The default run's cost: compile and run time against the tolerance, estimate on and off.
+
+    python benchmarks/default_run.py [--repeat 5]
+
+Issue "Error control", item 8 asks the default run (β = 100, z̄0 = 0.5, t̄ ≤ 5) for no more than
+0.16 s run and 0.9 s compile on a quiet 2-core machine (the figures of the old hand-tuned
+grid, whose error there was up to 4.8e-3 of the peak). Each row is a fresh process (so the
+first call compiles): ``lubjax.relax(100, 0.5, 5)`` at ``Settings(rtol=…, error_estimate=…)``,
+the first call's compile time (``Result.compile_s``), the best and median run time of
+``--repeat`` further calls (``Result.run_s``), steps, nodes, and the error against a
+reference at rtol 1e-7 (benchmarks/accuracy.py's settings, cached in benchmarks/out/cache).
+Writes benchmarks/out/default_run.md with the machine and its load averages.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+OUT = os.path.join(ROOT, "benchmarks", "out")
+
+CHILD = r"""
+import json, sys, os
+import numpy as np, lubjax
+rtol, estimate, repeat = float(sys.argv[1]), sys.argv[2] == "on", int(sys.argv[3])
+settings = lubjax.Settings(rtol=rtol, error_estimate=estimate)
+first = lubjax.relax(100, 0.5, 5.0, settings=settings)
+runs = [lubjax.relax(100, 0.5, 5.0, settings=settings).run_s for _ in range(repeat)]
+t = np.linspace(0.01, 5.0, 500)
+print(json.dumps({"compile_s": first.compile_s, "first_run_s": first.run_s, "runs": runs,
+                  "steps": first.accepted, "rejected": first.rejected, "nodes": int(first.r.size),
+                  "force": first.at(t).tolist(), "load1": os.getloadavg()[0]}))
+"""
+
+
+def main(argv=None):
+    import numpy as np
+
+    from benchmarks import accuracy
+    from benchmarks.machine import describe
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeat", type=int, default=5)
+    args = ap.parse_args(argv)
+    t = np.linspace(0.01, 5.0, 500)
+    ref = accuracy.reference(100.0, 0.5, accuracy.REFERENCE, "ref")
+    ref_force = np.interp(t, accuracy.T_OUT, ref["force"])
+    peak = np.max(np.abs(ref_force))
+    rows = []
+    for rtol in (1e-2, 1e-3, 3e-4, 1e-4):
+        for estimate in ("off", "on"):
+            print(f"rtol {rtol:g}, estimate {estimate} ...", file=sys.stderr, flush=True)
+            proc = subprocess.run(
+                [sys.executable, "-c", CHILD, str(rtol), estimate, str(args.repeat)],
+                env=dict(os.environ, PYTHONPATH=ROOT), capture_output=True, text=True, check=True,
+            )
+            out = json.loads(proc.stdout.strip().splitlines()[-1])
+            err = np.max(np.abs(np.asarray(out["force"]) - ref_force)) / peak
+            rows.append((rtol, estimate, out, err))
+    lines = [
+        f"# The default run's cost ({describe()})",
+        "",
+        f"`python benchmarks/default_run.py --repeat {args.repeat}`: `relax(100, 0.5, t_end=5)`, "
+        "a fresh process per row; compile = the first call's `compile_s`; run = best / median of "
+        f"{args.repeat} further calls' `run_s`; error = max |F̄ - F̄_ref| / peak on t̄ ∈ [0.01, 5] "
+        "against benchmarks/accuracy.py's reference (rtol 1e-7). Defaults: rtol 1e-4, estimate on.",
+        "",
+        "| rtol | estimate | compile [s] | run best / median [s] | steps (rejected) | nodes | "
+        "error / peak | load1 |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for rtol, estimate, out, err in rows:
+        lines.append(
+            f"| {rtol:g} | {estimate} | {out['compile_s']:.2f} | {min(out['runs']):.3f} / "
+            f"{statistics.median(out['runs']):.3f} | {out['steps']} ({out['rejected']}) | "
+            f"{out['nodes']} | {err:.1e} | {out['load1']:.1f} |"
+        )
+    os.makedirs(OUT, exist_ok=True)
+    with open(os.path.join(OUT, "default_run.md"), "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
