@@ -665,7 +665,7 @@ def _solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, groups):
     predict = _cache.exported(f"predict {spec!r}", _model.batched_functions(spec)[1])
     with single_threaded_blas():
         y_loose = predict(theta, data, loose)[0]
-        r_loose = np.array(data.weight * (y_loose - data.response) / data.noise)
+        r_loose = np.array(data.weight * (y_loose - data.response) / data.noise[:, None])
     err = (r_loose - r_fit) / 3.0
     err[~np.isfinite(err)] = 0.0
     return [np.concatenate([err[t] for t in g]) for g in groups]

@@ -186,4 +186,9 @@ def test_sweep_takes_a_drive_and_matches_single_runs():
     assert res.ok.all()
     for k in range(2):
         one = lubjax.relax(betas[k], z0s[k], 3.0, drive=lubjax.Load(), settings=FAST)
-        np.testing.assert_allclose(res.gap[k], one.at(times, "gap"), rtol=1e-9, atol=1e-12)
+        # Not to the last bit: batched and single solves round differently, and in the first
+        # steps (F̄ ~ 1e-12) the error estimate is rounding, so the step sequences part there
+        # and the runs differ by a fraction of the controlled error (1.5e-9 measured here;
+        # tests/test_sweep.py). A batch that mixed its members would be off by O(1).
+        np.testing.assert_allclose(res.gap[k], one.at(times, "gap"), rtol=0.05 * FAST.rtol,
+                                   atol=1e-12)
