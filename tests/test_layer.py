@@ -367,7 +367,7 @@ def test_a_layer_runs_a_smooth_start_on_the_default_mesh():
     tau = 0.05 / 1.26  # the stage lag in units of t_c (d_c = 126 μm)
     s = np.linspace(0.0, 0.01, 2001)
     d = s - tau * (1 - np.exp(-s / tau))
-    hist = lubjax.SampledTravel(s, d / 0.01, breakpoints=(0.0,))
+    hist = lubjax.SampledTravel(s, d, breakpoints=(0.0,))
     settings = lubjax.Settings(error_estimate=False)
     lubjax.relax(41.4, 1.11, 0.01, drive=lubjax.Travel(hist), settings=settings)  # half-space
     lubjax.relax(41.4, 1.11, 0.01, drive=lubjax.Travel(hist), substrate=lubjax.Layer(9.96),
