@@ -1,6 +1,6 @@
 """Where the richer substrates matter: maps of the error of the default elastic half-space.
 
-    python benchmarks/substrate_maps.py [--quick] [--only viscoelastic|layer]
+    python benchmarks/substrate_maps.py [--quick] [--only viscoelastic|layer] [--z0 0.5,1]
 
 1. Viscoelastic: a relaxation test (ramp to t̄ = 1, hold to t̄ = 5) on a standard linear solid,
    E(t) = E∞ + (E₀ - E∞) e^{-t/τ}, against the elastic half-space at E*∞ (the relaxed modulus,
@@ -10,9 +10,10 @@
    longer good enough at either modulus. All members of the map run in one vmap (the solid's
    parameters are traced leaves of the substrate).
 2. Layer (needs lubjax/_layer.py): the bonded incompressible layer against the half-space over
-   H̄ = H/√(R d_c) × β for z̄0 ∈ {0.5, 1}: the maximum |F̄_layer - F̄_halfspace| relative to the
-   peak, over t̄ ∈ [0, 5], with the 1 % contour; the paper's samples (H = 5 mm, R = 2 mm,
-   d_c = 126-154 μm, β ≈ 41-68) are marked.
+   H̄ = H/√(R d_c) × β for z̄0 ∈ {0.5, 1} (``--z0``; --quick: 1 only), one panel each: the
+   maximum |F̄_layer - F̄_halfspace| relative to the peak, over t̄ ∈ [0, 5], with the 1 % contour;
+   the paper's samples (H = 5 mm, R = 2 mm, d_c = 126-154 μm, β ≈ 41-68; z̄0 = 1.11-0.91) are
+   marked on every panel.
 
 Outputs: benchmarks/out/substrate_maps.md and benchmarks/out/substrate_maps.png
 (substrate_maps_<only>.md/.png with --only).
@@ -72,10 +73,10 @@ def viscoelastic_map(quick):
                 seconds=seconds, beta=beta, z0=z0)  # fmt: skip
 
 
-def layer_map(quick):
+def layer_map(quick, z0s=None):
     thick = np.geomspace(1.0, 100.0, 5 if quick else 9)
     betas = np.geomspace(1.0, 1e4, 5 if quick else 9)
-    z0s = (1.0,) if quick else (0.5, 1.0)
+    z0s = z0s or ((1.0,) if quick else (0.5, 1.0))
     half = {z0: lubjax.sweep(betas, z0, 5.0, settings=SETTINGS, times=TIMES) for z0 in z0s}
     err = {}
     start = time.perf_counter()
@@ -101,7 +102,10 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", choices=("viscoelastic", "layer"))
+    ap.add_argument("--z0", help="layer map: comma-separated z̄0 values (default 0.5,1; "
+                    "--quick: 1)")
     args = ap.parse_args(argv)
+    z0s = tuple(float(v) for v in args.z0.split(",")) if args.z0 else None
     import matplotlib
 
     matplotlib.use("Agg")
@@ -132,8 +136,8 @@ def main(argv=None):
             print("lubjax/_layer.py not available: layer map skipped", flush=True)
         else:
             print("layer map ...", flush=True)
-            lay = layer_map(args.quick)
-            panels.append(("layer", lay))
+            lay = layer_map(args.quick, z0s)
+            panels += [("layer", dict(lay, z0=z0)) for z0 in lay["err"]]
             for z0, err in lay["err"].items():
                 lines += [
                     f"Bonded incompressible layer vs half-space, z̄0 = {z0:g}: max |ΔF̄| / peak "
@@ -164,7 +168,7 @@ def main(argv=None):
                          f"z̄0 = {d['z0']:g}\nred: 1 % of the peak force", fontsize=9)
             fig.colorbar(cs, ax=ax, label="log10 max|ΔF̄|/peak")
         else:
-            z0 = max(d["err"])
+            z0 = d["z0"]
             X, Y = np.meshgrid(d["betas"], d["thick"])
             err = d["err"][z0]
             cs = ax.contourf(X, Y, np.log10(np.maximum(err, 1e-6)), extend="max",

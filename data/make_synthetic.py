@@ -32,6 +32,7 @@ noise draws to them), the noisy ones to ``data/``. True values are in each file'
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import sys
@@ -63,11 +64,34 @@ CREEP_RAMP_S = 1.0
 CREEP_HOLD_S = 29.0
 FINE = lubjax.Settings(rtol=1e-7, atol=1e-16, dr=0.01, mesh_growth=1.02, length=1000.0,
                        max_steps=200_000, error_estimate=False)
+#: Layer traces: the stepper's absolute force floor (lubjax._stepper.FORCE_ATOL, 1e-12) is raised
+#: to 1e-10 (5e-10 of the smallest peak F̄ here) for the run. On a layer the force emerging from
+#: zero under the stage's smooth start (v = 0 at t_on) carries more rounding from the solve than
+#: 1e-12, the error test cannot pass and the step size collapses at t̄ ≈ 2.4e-7 (at rtol 1e-7
+#: with the ideal ramp too); the half-space runs are unaffected. Not fixed in the stepper here
+#: (tests/test_layer.py, strict xfail). The floor is read when a run is compiled: it must be the
+#: first run of its shape in the process (a cached executable would keep 1e-12).
+LAYER_FORCE_ATOL = 1e-10
+
+
+@contextlib.contextmanager
+def _force_floor(value):
+    from lubjax import _stepper
+
+    old = _stepper.FORCE_ATOL
+    _stepper.FORCE_ATOL = value
+    try:
+        yield
+    finally:
+        _stepper.FORCE_ATOL = old
+
+
 GENERATOR = ("data/make_synthetic.py, lubjax Settings(rtol=1e-7, atol=1e-16, dr=0.01, "
              "mesh_growth=1.02, length=1000), input sampled at 40001 points")
 
 # (file stem, indent dc [m], viscosity [Pa s], noise fraction of peak force, seed, substrate or
-# drive: "" elastic, "visco" a standard linear solid, "spring" the load cell of SPRING_N_M)
+# drive: "" elastic, "visco" a standard linear solid, "spring" the load cell of SPRING_N_M,
+# "layer:H" a bonded incompressible layer of thickness H [m] on a rigid base)
 CASES = [
     ("paper_dc126", 126e-6, 100.0, 0.01, 126, ""),
     ("paper_dc140", 140e-6, 100.0, 0.01, 140, ""),
@@ -75,6 +99,7 @@ CASES = [
     ("hard_dc140_noise5", 140e-6, 100.0, 0.05, 1405, ""),
     ("visco_dc140", 140e-6, 100.0, 0.01, 1401, "visco"),
     ("spring_dc140", 140e-6, 100.0, 0.01, 1402, "spring"),
+    ("layer2mm_dc140", 140e-6, 100.0, 0.01, 1403, "layer:2e-3"),
 ]
 #: noise of the creep trace's displacement, fraction of its final value, and the seed
 CREEP_NOISE, CREEP_SEED = 0.002, 30
@@ -101,8 +126,9 @@ def _fine_history(shape, t_end_bar, time_scale, breakpoints):
     return lubjax.SampledTravel(s, shape(QUIET_S + s * time_scale), breakpoints=breakpoints)
 
 
-def clean_force(indent, viscosity, times, kind=""):
-    """Noiseless force [N] at ``times`` [s] from a fine-grid lubjax run."""
+def clean_force(indent, viscosity, times, kind="", layer_m=None):
+    """Noiseless force [N] at ``times`` [s] from a fine-grid lubjax run; ``layer_m``: a bonded
+    incompressible layer of that thickness [m] on a rigid base instead of the half-space."""
     test = lubjax.RelaxationTest.from_E(
         E_MODULUS, POISSON, radius=RADIUS, viscosity=viscosity, speed=SPEED, indent=indent, gap=GAP
     )
@@ -114,11 +140,15 @@ def clean_force(indent, viscosity, times, kind=""):
         lubjax.Viscoelastic.standard_linear_solid(VISCO_STIFFENING, VISCO_TAU_S / tc)
         if kind == "visco" else None
     )
+    if layer_m is not None:
+        substrate = lubjax.Layer(lubjax.layer_thickness_bar(layer_m, RADIUS, indent), POISSON,
+                                 "bonded")
     # K̄ = π k/(2E*√(R d_c)) (lubjax/_drives.py)
     stiffness = math.pi * SPRING_N_M / (2 * test.E_star * math.sqrt(RADIUS * indent))
     drive = lubjax.Spring(stiffness, history) if kind == "spring" else lubjax.Travel(history)
-    res = lubjax.relax(test.beta, test.z0_bar, t_bar_end, drive=drive, substrate=substrate,
-                       settings=FINE)
+    with _force_floor(LAYER_FORCE_ATOL) if layer_m is not None else contextlib.nullcontext():
+        res = lubjax.relax(test.beta, test.z0_bar, t_bar_end, drive=drive, substrate=substrate,
+                           settings=FINE)
     tb = (times - QUIET_S) / tc
     force = np.where(tb <= 0, 0.0, res.at(np.clip(tb, 0.0, t_bar_end)))
     return test, test.force_scale * force
@@ -177,8 +207,9 @@ def main(only=None):
             continue
         start = time.perf_counter()
         key = (indent, viscosity, kind)
+        layer_m = float(kind.split(":")[1]) if kind.startswith("layer:") else None
         if key not in cache:
-            cache[key] = clean_force(indent, viscosity, times, kind)
+            cache[key] = clean_force(indent, viscosity, times, "" if layer_m else kind, layer_m)
         test, force = cache[key]
         extra = {"true_indent_m": f"{indent:.6g}", "true_speed_m_s": f"{SPEED:.6g}",
                  "true_beta": f"{test.beta:.6g}"}
@@ -187,6 +218,11 @@ def main(only=None):
         if kind == "visco":
             extra.update(true_stiffening=f"{VISCO_STIFFENING:g}",
                          true_relaxation_time_s=f"{VISCO_TAU_S:g}")
+        if layer_m is not None:
+            hbar = lubjax.layer_thickness_bar(layer_m, RADIUS, indent)
+            extra.update(substrate="bonded incompressible layer on a rigid base",
+                         true_layer_thickness_m=f"{layer_m:g}",
+                         true_layer_thickness_bar=f"{hbar:.6g}")
         meta = _meta(stem, test.E_star, viscosity, extra)
         meta["noise_fraction_of_peak"] = f"{noise:g}"
         _write(stem, times, travel(times, indent), force, meta, "force",

@@ -263,3 +263,112 @@ def test_dry_contact_on_a_thin_incompressible_bonded_layer():
     ratio = thickness / (2 * np.sqrt(deltas))  # H/a
     slope = np.polyfit(np.log(ratio), np.log(excess), 1)[0]
     assert np.all(excess > 0) and excess[-1] < 0.015 and 1.6 < slope < 2.2, (excess, slope)
+
+
+# --- Dry contact on a bonded incompressible layer of finite thickness (issue 10) ---------------
+
+
+def _contact_edge(r, p):
+    """Contact radius ā: the zero of p̄², linear in r̄ near a smooth Hertz-like edge
+    (p ∝ √(a - r)), fitted through the last three loaded nodes."""
+    k = np.nonzero(p > 0)[0][-1]
+    slope, icpt = np.polyfit(r[k - 2:k + 1], p[k - 2:k + 1] ** 2, 1)
+    return -icpt / slope
+
+
+def _layer_contact_mesh():
+    # H̄ = 1 is the unit: ā = a/h. Δr̄ = 0.005 (a/h = 0.2 spans 40 cells); the base cuts the
+    # far field off at r ~ H, so L̄ = 20 H loses nothing. Results move < 0.7 % at Δr̄ = 0.0025.
+    mesh = lubjax.graded_mesh(dr=0.005, r_fine=1.2, length=20.0, growth=1.1)
+    return mesh, lubjax.layer_influence_matrix(mesh, 1.0, 0.5, "bonded")
+
+
+def test_dry_contact_on_a_thick_bonded_layer_matches_its_asymptotics():
+    """Rigid sphere, frictionless, on a bonded ν = ½ layer with a ≪ h: exact leading terms.
+
+    For h ≫ a only k ≲ 1/h feels the base, where p̃(k)J₀(kr) ≈ (P/2π)(1 - k²(r² + ⟨s²⟩)/4), so the
+    base adds Δw = (P/(πE*))[c₀/h - c₂(r² + ⟨s²⟩)/(4h³)] (c_n = ∫₀^∞ (1 - C(t)) tⁿ dt): a uniform
+    lift (the 1/H̄ of test_a_thick_layer_is_the_half_space) and, at order (a/h)³, a curvature.
+    The lift turns Hertz into δ + P c₀/(πE*h) = a²/R, so at fixed δ the load ratio
+    q = P/P_Hertz(δ) solves q = (1 + A q x)^{3/2}, x = √(Rδ)/h, A = 4c₀/(3π):
+    q = 1 + (3/2)A x + (21/8)A² x² + O(x³). Tested on F̄_layer(δ̄)/F̄_half(δ̄) on one mesh (the
+    mesh's own error cancels; no contact radius needed): measured 1.126 and 1.44 against
+    2c₀/π = 1.127 and (21/8)A² = 1.48 (the fitted x³ term absorbs some of the x²)."""
+    mesh, W = _layer_contact_mesh()
+    r = mesh.r
+    half = lubjax.influence_matrix(mesh)
+    c = lubjax.force_weights(mesh)
+    c0 = quad(lambda t: -_layer.transfer_minus_one(t, 0.5, "bonded"), 0, 60, limit=200)[0]
+    A = 4 * c0 / (3 * math.pi)
+    x = np.array([0.1, 0.15, 0.2, 0.25, 0.3, 0.35])
+    excess = np.array([c @ _dry_contact(W, r, d) / (c @ _dry_contact(half, r, d)) - 1
+                       for d in x**2])
+    a1, a2, _ = np.linalg.lstsq(np.c_[x, x**2, x**3], excess, rcond=None)[0]
+    assert a1 == pytest.approx(1.5 * A, rel=0.01), (a1, 1.5 * A)
+    assert a2 == pytest.approx(21 / 8 * A**2, rel=0.1), (a2, 21 / 8 * A**2)
+
+
+def _shull_table():
+    mesh, W = _layer_contact_mesh()
+    r = mesh.r
+    c = lubjax.force_weights(mesh)
+    rows = []
+    for d in (0.04, 0.09, 0.16, 0.25, 0.36, 0.49, 0.64):
+        p = _dry_contact(W, r, d)
+        x = _contact_edge(r, p)  # a/h
+        load = (c @ p) / (2 * math.pi / 3 * x**3)  # P/P_H at this a (F̄_H = 2πā³/3)
+        rows.append((x, load, 1 + 0.33 * x**3, d / x**2, 0.4 + 0.6 * math.exp(-1.8 * x)))
+    return np.array(rows)
+
+
+@pytest.mark.xfail(strict=True, reason="Shull's fitted corrections disagree with the exact "
+                   "small-a/h terms and with the converged layer solution (docstring)")
+def test_shull_finite_thickness_correction():
+    """Shull's correction for a rigid sphere on a bonded ν = ½ layer (Shull, Mater. Sci. Eng. R
+    36 (2002) 1; Shull et al., Macromol. Chem. Phys. 199 (1998) 489): P = P_H(1 + 0.33(a/h)³),
+    δ = δ_H(0.4 + 0.6 e^{-1.8a/h}), P_H = 4E*a³/(3R), δ_H = a²/R; asserted here to 5 % over
+    a/h = 0.2-1. Not confirmed: the library holds Shull's review only as an abstract, so the
+    forms, the indenter's boundary condition in his finite-element fits (frictionless or no
+    slip) and his stated accuracy are as the issue gives them, not re-read.
+
+    It fails. The lubjax solution (frictionless sphere, the layer's exact kernel; Δr̄ = 0.005,
+    within 0.7 % of Δr̄ = 0.0025), a/h: P/P_H [Shull] ; δ/δ_H [Shull]
+        0.22: 1.013 [1.003] ; 0.848 [0.806]     0.48: 1.071 [1.036] ; 0.707 [0.655]
+        0.77: 1.225 [1.151] ; 0.607 [0.550]     1.08: 1.487 [1.419] ; 0.546 [0.485]
+    P(a) is within 3.4 % of Shull up to a/h ≈ 0.5, 5.0 % at 0.62, 6.5 % at 0.77-0.93; δ(a) is
+    5-12 % off throughout (growing with a/h).
+    Cause: the formulas' small-a/h terms are not the layer's. Exactly (see the asymptotics test
+    above), δ/δ_H = 1 - (4c₀/3π)(a/h) + O((a/h)³) with 4c₀/(3π) = 0.751, where Shull's form has
+    slope 1.08 (the uniform lift depends only on P and the layer, not on indenter friction), and
+    P/P_H = 1 + (2c₂/3π)(a/h)³ + ... with 2c₂/(3π) = 0.813, not 0.33 (0.336 is the coefficient of
+    a *frictionless* base). The measured (P/P_H - 1)/(a/h)³ falls from ≈ 0.8 toward 0.38 at
+    a/h = 1.08, crossing 0.33 near a/h = 1.2, so a cubic with 0.33 can only be a fit over a
+    wider range. The derivation and the test above are independent of Shull; this test records
+    the disagreement (strict xfail: it is reported if it ever passes)."""
+    t = _shull_table()
+    x, load, load_shull, disp, disp_shull = t.T
+    assert x.min() < 0.25 and x.max() > 1.0
+    inside = x <= 1.0
+    assert np.all(np.abs(load / load_shull - 1)[inside] < 0.05), t
+    assert np.all(np.abs(disp / disp_shull - 1)[inside] < 0.05), t
+
+
+@pytest.mark.xfail(strict=True, raises=lubjax.SolverError,
+                   reason="known: on a layer the step size collapses at t̄ ≈ 2.4e-7 under a "
+                   "smooth start on the default mesh (force floor FORCE_ATOL = 1e-12)")
+def test_a_layer_runs_a_smooth_start_on_the_default_mesh():
+    """The stage's first-order lag (data/make_synthetic.py: v = 0 at the start) on a 5 mm layer,
+    default Settings: the half-space runs; on the layer the force emerging from zero carries
+    more rounding than the stepper's absolute floor 1e-12 and the error test never passes
+    (found making the layer traces; they raise the floor to 1e-10 for their runs, data/README).
+    It did not reproduce on a short coarse mesh (L̄ = 50, Δr̄ = 0.05, a similar lagged start).
+    The layer fits of benchmarks/layer_fit_bias.py and tests/test_layer_fit.py ran (their
+    history is the 100 Hz record's interpolant, at FIT_SETTINGS)."""
+    tau = 0.05 / 1.26  # the stage lag in units of t_c (d_c = 126 μm)
+    s = np.linspace(0.0, 0.01, 2001)
+    d = s - tau * (1 - np.exp(-s / tau))
+    hist = lubjax.SampledTravel(s, d, breakpoints=(0.0,))
+    settings = lubjax.Settings(error_estimate=False)
+    lubjax.relax(41.4, 1.11, 0.01, drive=lubjax.Travel(hist), settings=settings)  # half-space
+    lubjax.relax(41.4, 1.11, 0.01, drive=lubjax.Travel(hist), substrate=lubjax.Layer(9.96),
+                 settings=settings)
