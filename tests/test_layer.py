@@ -355,15 +355,21 @@ def test_shull_finite_thickness_correction():
 
 @pytest.mark.xfail(strict=True, raises=lubjax.SolverError,
                    reason="known: on a layer the step size collapses at t̄ ≈ 2.4e-7 under a "
-                   "smooth start on the default mesh (force floor FORCE_ATOL = 1e-12)")
+                   "smooth start on the default mesh (a stiff transient in the force's "
+                   "error estimate; docstring)")
 def test_a_layer_runs_a_smooth_start_on_the_default_mesh():
     """The stage's first-order lag (data/make_synthetic.py: v = 0 at the start) on a 5 mm layer,
-    default Settings: the half-space runs; on the layer the force emerging from zero carries
-    more rounding than the stepper's absolute floor 1e-12 and the error test never passes
-    (found making the layer traces; they raise the floor to 1e-10 for their runs, data/README).
-    It did not reproduce on a short coarse mesh (L̄ = 50, Δr̄ = 0.05, a similar lagged start).
-    The layer fits of benchmarks/layer_fit_bias.py and tests/test_layer_fit.py ran (their
-    history is the 100 Hz record's interpolant, at FIT_SETTINGS)."""
+    default Settings: the half-space runs; on the layer the steps collapse to 1e-15 at
+    t̄ = 2.448e-7 (found making the layer traces; they raise the force floor FORCE_ATOL from
+    1e-12 to 1e-10 for their runs, data/README). Diagnosed (per-attempt prints of the
+    stepper): not rounding (refinement puts the solve's rounding of F̄ at ~1e-22): the film's
+    error ratio stays ~1e-12 while every attempt above dt ~ 1e-14 moves F̄ from 1.41e-9 to
+    ~1e-8, which the force's Milne estimate rejects. Most likely a stiff mode: pressure the layer's
+    rigid base barely lets move the surface (so the film, the state, hardly sees it) relaxing
+    on a time scale ~1e-14; the early steps left the state off its slow manifold, a step longer
+    than that time scale jumps onto it, and the force test calls the jump an error. Remedy not
+    done: a filtered estimate (Shampine's (I - γΔt J)⁻¹ applied to the error, one more solve
+    with the step's factors) or controlling F̄ through the film only."""
     tau = 0.05 / 1.26  # the stage lag in units of t_c (d_c = 126 μm)
     s = np.linspace(0.0, 0.01, 2001)
     d = s - tau * (1 - np.exp(-s / tau))
