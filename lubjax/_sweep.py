@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _sharding
 from ._indenter import RampHold, SampledTravel
 from ._solve import BETA_RANGE, Z0_RANGE, Settings, _check_x64, make_plan
 from ._stepper import DONE, evaluate, rollout
@@ -46,31 +47,34 @@ def _one(tol, disc, history, substrate, t_end, times, b, z):
     )
 
 
-# Sharding: the batch is split into one chunk per device and each chunk runs the same
-# single-device jit(vmap(rollout)) with its inputs committed to that device. No SPMD
-# partitioning, so no cross-device step: an SPMD version (jit with NamedSharding, or shard_map)
-# hung on forced host devices.
 @functools.lru_cache(maxsize=8)
 def _batched(tol):
     one = functools.partial(_one, tol)
-    return jax.jit(jax.vmap(one, in_axes=(None, None, None, None, None, 0, 0)))
-
+    return jax.vmap(one, in_axes=(None, None, None, None, None, 0, 0))
 
 
 _COMPILED: dict = {}
 
 
-def _compiled_for(tol, args, device):
-    """AOT-compile once per (device, mesh size, history, output count, tolerance, chunk size);
-    returns (fn, seconds)."""
+def _compiled_for(tol, args, mesh):
+    """AOT-compile once per (device count, mesh size, drive, output count, tolerance, batch
+    size); returns (fn, seconds). With a mesh the shared inputs are replicated and β, z̄0 and
+    every output split over it: one SPMD program for all devices (lubjax/_sharding.py)."""
     disc, history, substrate, _, times, b, _ = args
     leaves, treedef = jax.tree_util.tree_flatten((history, substrate))
     shapes = tuple(np.shape(x) for x in leaves)
-    key = (device.id, disc.r.shape[0], treedef, shapes, times.shape[0], tol, b.shape[0])
+    n_dev = 1 if mesh is None else mesh.size
+    key = (n_dev, disc.r.shape[0], treedef, shapes, times.shape[0], tol, b.shape[0])
     if key in _COMPILED:
         return _COMPILED[key], 0.0
+    if mesh is None:
+        fn = jax.jit(_batched(tol))
+    else:
+        rep, split = _sharding.replicated(mesh), _sharding.batch_sharding(mesh)
+        fn = jax.jit(_batched(tol), in_shardings=(rep,) * 5 + (split, split),
+                     out_shardings=split)
     start = time.perf_counter()
-    _COMPILED[key] = _batched(tol).lower(*args).compile()
+    _COMPILED[key] = fn.lower(*args).compile()
     return _COMPILED[key], time.perf_counter() - start
 
 
@@ -110,42 +114,26 @@ def sweep(
             raise ValueError(
                 f"{name} values must be finite and in [{lo:g}, {hi:g}], got {v[~good][:3]}"
             )
-    n_dev = len(jax.devices()) if devices is None else int(devices)
-    if not 1 <= n_dev <= len(jax.devices()):
-        raise ValueError(f"devices must be in [1, {len(jax.devices())}], got {devices}")
+    n_dev = _sharding.device_count(devices)
     plan = make_plan(
         t_end, history=history, drive=drive, substrate=substrate, settings=settings, times=times
     )
-    pad = (-b.size) % n_dev
-    bp = np.concatenate([b, np.full(pad, b[-1])])
-    zp = np.concatenate([z, np.full(pad, z[-1])])
-    chunk = bp.size // n_dev
-    shared = (plan.disc, plan.drive, plan.substrate, plan.t_end, plan.t)
-    used = jax.devices()[:n_dev]
-    per_device = [
-        jax.device_put((*shared, bp[k * chunk:(k + 1) * chunk], zp[k * chunk:(k + 1) * chunk]), d)
-        for k, d in enumerate(used)
-    ]
-    # One executable per device (each is bound to its device's inputs), cached across calls;
-    # compile time reported apart (0 when cached).
-    compiled_and_time = [_compiled_for(plan.tol, args, d) for args, d in zip(per_device, used)]
-    compiled = [fn for fn, _ in compiled_and_time]
-    compile_s = sum(s for _, s in compiled_and_time)
+    # Pad to a multiple of the device count (a sharded axis splits evenly); cut off below.
+    pad = _sharding.padding(b.size, n_dev)
+    bp, zp = _sharding.pad_leading((b, z), pad)
+    mesh = _sharding.batch_mesh(n_dev)
+    args = (
+        *_sharding.replicate((plan.disc, plan.drive, plan.substrate, plan.t_end, plan.t), mesh),
+        *_sharding.shard_batch((bp, zp), mesh),
+    )
+    # Cached across calls; compile time reported apart (0 when cached).
+    compiled, compile_s = _compiled_for(plan.tol, args, mesh)
     start = time.perf_counter()
-    # Accelerators run their chunks concurrently (asynchronous dispatch). Host "devices" share
-    # the CPU's LAPACK, and concurrent calls into a single-threaded OpenBLAS
-    # (OPENBLAS_NUM_THREADS=1) deadlocked, so on CPU the chunks run one after another.
-    on_cpu = jax.devices()[0].platform == "cpu"
-    outs = []
     with single_threaded_blas():
-        for fn, args in zip(compiled, per_device):
-            outs.append(fn(*args))
-            if on_cpu:
-                jax.block_until_ready(outs[-1])
-        outs = jax.block_until_ready(outs)
+        outs = jax.block_until_ready(compiled(*args))
     run_s = time.perf_counter() - start
     force, film_min, gap, ok, steps = (
-        np.concatenate([np.asarray(o[i]) for o in outs])[: b.size] for i in range(5)
+        _sharding.to_host(o)[: b.size] for o in outs
     )
     ok = ok & np.all(np.isfinite(force), axis=1)
     return SweepResult(b, z, plan.t, force, film_min, gap, ok, steps, compile_s, run_s, n_dev)

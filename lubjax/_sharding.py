@@ -1,0 +1,106 @@
+"""Split a batch axis over JAX devices with ``jax.sharding`` (shared by ``sweep`` and the fits).
+
+A batch (the (β, z̄0) pairs of a sweep, the traces of a batched fit) is one ``jit`` of a
+``vmap``-ed function. To run it on several devices the leading axis of the per-member inputs is
+laid out over a one-axis :class:`jax.sharding.Mesh` (``"batch"``) with
+``NamedSharding(mesh, P("batch"))`` and everything the members share (the discretisation, the
+drive, the output times) is replicated (``NamedSharding(mesh, P())``). XLA's SPMD partitioner
+then compiles one program that every device runs on its slice: no hand-written per-device loop,
+and on accelerators the slices run concurrently.
+
+The only cross-device communication is the loop condition of the ``vmap``-ed adaptive
+``while_loop`` (the batch runs until its slowest member is done): a reduce-or over the batch,
+which the partitioner turns into an all-reduce of one boolean per iteration. All devices
+therefore run the same number of iterations, the global slowest member's, exactly what one device
+would run for the whole batch; finished members are frozen by the loop's select, so every member
+takes the same steps it would take on one device.
+
+The batch is padded to a multiple of the device count (by repeating the last member; the padded
+rows are cut off again), since a sharded axis must split evenly.
+
+With one device (the default on a plain CPU) :func:`batch_mesh` returns ``None`` and the callers
+run exactly as before: one unsharded ``jit`` call.
+
+Several hosts: after ``jax.distributed.initialize()`` on every process, ``jax.devices()`` lists
+the devices of all hosts and the same mesh spans them: ``jax.device_put`` builds the global
+arrays from host data that every process passes alike, and :func:`to_host` gathers the results
+back to every process. This path was not tested here, for want of a cluster.
+"""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
+
+AXIS = "batch"
+
+
+def device_count(devices: int | None) -> int:
+    """The number of devices to use: all of ``jax.devices()`` by default, else ``devices``
+    (checked to be in [1, len(jax.devices())])."""
+    available = len(jax.devices())
+    n = available if devices is None else int(devices)
+    if not 1 <= n <= available:
+        raise ValueError(f"devices must be in [1, {available}], got {devices}")
+    return n
+
+
+def batch_mesh(n_devices: int) -> Mesh | None:
+    """A one-axis mesh over the first ``n_devices`` devices; None for one device (unsharded)."""
+    if n_devices == 1:
+        return None
+    return Mesh(np.array(jax.devices()[:n_devices]), (AXIS,))
+
+
+def padding(size: int, n_devices: int) -> int:
+    """How many members to append so that ``size`` splits evenly over the devices."""
+    return (-size) % n_devices
+
+
+def pad_leading(tree, pad: int):
+    """Append ``pad`` copies of the last member along the leading axis of every leaf."""
+    if pad == 0:
+        return tree
+
+    def one(x):
+        x = np.asarray(x)
+        return np.concatenate([x, np.repeat(x[-1:], pad, axis=0)])
+
+    return jax.tree_util.tree_map(one, tree)
+
+
+def batch_sharding(mesh: Mesh) -> NamedSharding:
+    """Leading axis split over the mesh, the rest of each array whole on every device."""
+    return NamedSharding(mesh, P(AXIS))
+
+
+def replicated(mesh: Mesh) -> NamedSharding:
+    """The whole array on every device."""
+    return NamedSharding(mesh, P())
+
+
+def _put(tree, sharding):
+    # From host data, device_put also builds arrays that span several processes (each must pass
+    # the same values; the inputs here are small and built identically everywhere).
+    return jax.device_put(tree, sharding)
+
+
+def shard_batch(tree, mesh: Mesh | None):
+    """Put a batch (leading axis) over the mesh; unchanged without a mesh."""
+    return tree if mesh is None else _put(tree, batch_sharding(mesh))
+
+
+def replicate(tree, mesh: Mesh | None):
+    """Put shared inputs on every device of the mesh; unchanged without a mesh."""
+    return tree if mesh is None else _put(tree, replicated(mesh))
+
+
+def to_host(x) -> np.ndarray:
+    """A (possibly sharded) result as one NumPy array on this process."""
+    if jax.process_count() > 1 and not x.is_fully_addressable:
+        from jax.experimental import multihost_utils
+
+        return np.asarray(multihost_utils.process_allgather(x, tiled=True))
+    return np.asarray(x)
