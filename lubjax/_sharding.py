@@ -18,6 +18,22 @@ takes the same steps it would take on one device.
 The batch is padded to a multiple of the device count (by repeating the last member; the padded
 rows are cut off again), since a sharded axis must split evenly.
 
+Host devices (CPU, e.g. ``XLA_FLAGS=--xla_force_host_platform_device_count=N``): the devices'
+programs run concurrently on XLA:CPU's one intra-op thread pool, whose size is the number of
+schedulable cores unless the environment variable ``PJRT_NPROC`` (read once, when JAX creates
+its CPU client) says otherwise. In jaxlib 0.10.2 the batched LAPACK kernels (the stepper's LU,
+``lapack_dgetrf_ffi``) split their batch over that same pool and block until the pieces are
+done (``jax::ParallelBatchMap`` → ``BlockingCounter::Wait``). With N device programs on a
+pool of at most N threads every thread ends up waiting for pieces that no free thread can run:
+a deadlock at 0 % CPU (gdb on a hung 2-device sweep on 2 cores: both ``tf_XLAEigen`` threads in
+``BlockingCounter::Wait`` under ``lapack_dgetrf_ffi``). That is why the SPMD version once "hung"
+on forced host devices, and most likely also the "concurrent single-threaded OpenBLAS"
+deadlock of the old per-device loop: OpenBLAS is not involved, ``threadpoolctl`` and
+``--xla_cpu_multi_thread_eigen=false`` change nothing, ``PJRT_NPROC=N+1`` (one thread more than
+device programs) removes it. A per-device batch of one member does not fan out and does not
+hang. :func:`batch_mesh` therefore refuses several host devices on a pool that is too small
+instead of hanging. Accelerators do not run LAPACK on the host pool.
+
 With one device (the default on a plain CPU) :func:`batch_mesh` returns ``None`` and the callers
 run exactly as before: one unsharded ``jit`` call.
 
@@ -28,6 +44,8 @@ back to every process. This path was not tested here, for want of a cluster.
 """
 
 from __future__ import annotations
+
+import os
 
 import jax
 import numpy as np
@@ -47,10 +65,30 @@ def device_count(devices: int | None) -> int:
     return n
 
 
+def host_pool_size() -> int:
+    """Threads of XLA:CPU's intra-op pool: ``PJRT_NPROC`` (or ``NPROC``) if set, else the
+    schedulable cores (what the CPU client reads when it is created)."""
+    for name in ("PJRT_NPROC", "NPROC"):
+        value = os.environ.get(name, "")
+        if value.strip().isdigit():
+            return int(value)
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+
+
 def batch_mesh(n_devices: int) -> Mesh | None:
-    """A one-axis mesh over the first ``n_devices`` devices; None for one device (unsharded)."""
+    """A one-axis mesh over the first ``n_devices`` devices; None for one device (unsharded).
+
+    Raises RuntimeError for several CPU devices on an intra-op pool of at most as many threads
+    (it would deadlock, see the module docstring)."""
     if n_devices == 1:
         return None
+    pool = host_pool_size()
+    if jax.devices()[0].platform == "cpu" and pool <= n_devices:
+        raise RuntimeError(
+            f"{n_devices} CPU devices on an XLA:CPU thread pool of {pool} threads would "
+            f"deadlock in jaxlib's batched LAPACK kernels; set PJRT_NPROC={n_devices + 1} (or "
+            f"more) in the environment before JAX starts, or pass devices=1"
+        )
     return Mesh(np.array(jax.devices()[:n_devices]), (AXIS,))
 
 
