@@ -289,16 +289,17 @@ class _Evaluator:
 
     The trace axis is split over ``devices`` devices (lubjax/_sharding.py): the stacked data
     and θ are padded to a multiple of the device count (repeating the last trace) and laid out
-    with ``NamedSharding(mesh, P("batch"))``, the solver (mesh arrays) replicated, so the one
-    jit-ed call runs as one SPMD program over all devices; the padded rows are cut off. With
+    with ``NamedSharding(mesh, P("batch"))``, the solver (mesh arrays) replicated, and the one
+    jit-ed call is a ``shard_map`` of the vmap-ed model over the devices; the padded rows are
+    cut off. With
     one device nothing is padded or placed: the call is the plain jit of before."""
 
     def __init__(self, data, solver, spec, layout: _Layout, groups, devices: int = 1):
         self.data, self.solver, self.spec = data, solver, spec
         self.layout, self.groups = layout, groups
-        self.rj = _model.batched_functions(spec)[0]
-        self.runs = 0
         self.mesh = _sharding.batch_mesh(devices)
+        self.rj = _model.batched_functions(spec, self.mesh)[0]
+        self.runs = 0
         self.n_traces = len(layout.M)
         self.pad = _sharding.padding(self.n_traces, devices)
         self._placed = self.place(data, solver)  # the data do not change between iterations

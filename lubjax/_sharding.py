@@ -92,6 +92,24 @@ def batch_mesh(n_devices: int) -> Mesh | None:
     return Mesh(np.array(jax.devices()[:n_devices]), (AXIS,))
 
 
+def over_batch(fn, mesh: Mesh | None, batched: tuple[bool, ...]):
+    """``fn`` (a ``vmap``-ed function of positional arguments, batched where ``batched`` says)
+    as one SPMD function over the mesh: each device applies ``fn`` to its slice of the batch
+    and the replicated rest (``jax.shard_map``), every output split along its leading axis.
+    Unchanged without a mesh. Wrap the result in ``jax.jit``.
+
+    ``shard_map`` rather than letting the partitioner split a plain ``jit``: each device then
+    runs exactly the single-device program on its slice (no cross-device step inside, not even
+    the all-reduce of the ``while_loop``'s condition, so a device stops at its own slowest
+    member), and a member's result depends only on the members that share its device."""
+    if mesh is None:
+        return fn
+    specs = tuple(P(AXIS) if b else P() for b in batched)
+    # check_vma=False: the body has no collectives, and its while_loops start from replicated
+    # constants that become per-device values, which the varying-axes type check rejects.
+    return jax.shard_map(fn, mesh=mesh, in_specs=specs, out_specs=P(AXIS), check_vma=False)
+
+
 def padding(size: int, n_devices: int) -> int:
     """How many members to append so that ``size`` splits evenly over the devices."""
     return (-size) % n_devices

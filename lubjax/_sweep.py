@@ -59,7 +59,8 @@ _COMPILED: dict = {}
 def _compiled_for(tol, args, mesh):
     """AOT-compile once per (device count, mesh size, drive, output count, tolerance, batch
     size); returns (fn, seconds). With a mesh the shared inputs are replicated and β, z̄0 and
-    every output split over it: one SPMD program for all devices (lubjax/_sharding.py)."""
+    every output split over it: one jit of a shard_map, one SPMD program for all devices
+    (lubjax/_sharding.py)."""
     disc, history, substrate, _, times, b, _ = args
     leaves, treedef = jax.tree_util.tree_flatten((history, substrate))
     shapes = tuple(np.shape(x) for x in leaves)
@@ -67,12 +68,8 @@ def _compiled_for(tol, args, mesh):
     key = (n_dev, disc.r.shape[0], treedef, shapes, times.shape[0], tol, b.shape[0])
     if key in _COMPILED:
         return _COMPILED[key], 0.0
-    if mesh is None:
-        fn = jax.jit(_batched(tol))
-    else:
-        rep, split = _sharding.replicated(mesh), _sharding.batch_sharding(mesh)
-        fn = jax.jit(_batched(tol), in_shardings=(rep,) * 5 + (split, split),
-                     out_shardings=split)
+    batched = (False,) * 5 + (True, True)  # shared inputs, then β and z̄0
+    fn = jax.jit(_sharding.over_batch(_batched(tol), mesh, batched))
     start = time.perf_counter()
     _COMPILED[key] = fn.lower(*args).compile()
     return _COMPILED[key], time.perf_counter() - start
