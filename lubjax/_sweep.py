@@ -1,4 +1,16 @@
-"""Batches of relaxation tests in one compiled, ``vmap``-ped call, sharded over JAX devices."""
+"""Batches of relaxation tests in one compiled, ``vmap``-ped call, sharded over JAX devices.
+
+The batch of (β, z̄0) pairs is padded to a multiple of the device count and laid out on a
+one-axis device mesh (``NamedSharding(mesh, P("batch"))``); the discretisation, drive, substrate,
+t̄_end and output times are replicated (``P()``). One ``jax.jit`` of a ``shard_map`` of the
+``vmap``-ped rollout then runs as one SPMD program: each device runs the one-device program on
+its slice, so a member's result is bit-identical to the one-device sweep (tests/test_sharding.py)
+and a device stops at its own slowest member. It is compiled ahead of time
+(``.lower(...).compile()``) so the compile time is reported apart, and cached per device count,
+mesh size, drive, output count, tolerance and batch size. The helpers and the reason several
+CPU host devices need ``PJRT_NPROC`` > N (jaxlib's batched LAPACK deadlocks a smaller XLA:CPU
+pool) are in :mod:`lubjax._sharding`; with one device the call is a plain ``jit``.
+"""
 
 from __future__ import annotations
 
@@ -93,8 +105,9 @@ def sweep(
     ``while_loop``: the batch runs until its slowest member is done) and reports F̄ and min h̄
     at the shared output ``times`` (default 501 equally spaced) by its own interpolant; any
     ``drive`` (shared by the batch) instead of the travel ``history``, and any ``substrate``. The
-    batch is padded to a multiple of the device count and split across ``devices`` (default:
-    all of ``jax.devices()``). Failed runs are flagged in ``ok`` rather than raised, so one bad
+    batch is padded to a multiple of the device count and sharded across ``devices`` (default:
+    all of ``jax.devices()``; several CPU host devices need ``PJRT_NPROC`` > ``devices``,
+    lubjax/_sharding.py). Failed runs are flagged in ``ok`` rather than raised, so one bad
     corner does not discard a map.
 
     Example: a regime map over a grid, ``B, Z = np.meshgrid(betas, z0s); sweep(B, Z)``, then
