@@ -4,16 +4,20 @@ A batch (the (β, z̄0) pairs of a sweep, the traces of a batched fit) is one ``
 ``vmap``-ed function. To run it on several devices the leading axis of the per-member inputs is
 laid out over a one-axis :class:`jax.sharding.Mesh` (``"batch"``) with
 ``NamedSharding(mesh, P("batch"))`` and everything the members share (the discretisation, the
-drive, the output times) is replicated (``NamedSharding(mesh, P())``). XLA's SPMD partitioner
-then compiles one program that every device runs on its slice: no hand-written per-device loop,
-and on accelerators the slices run concurrently.
+drive, the output times) is replicated (``NamedSharding(mesh, P())``). The call is one
+``jit`` of a ``jax.shard_map`` of the ``vmap``-ed function (:func:`over_batch`): one SPMD program
+in which every device runs the one-device program on its slice. No hand-written per-device
+loop; on accelerators the slices run concurrently.
 
-The only cross-device communication is the loop condition of the ``vmap``-ed adaptive
-``while_loop`` (the batch runs until its slowest member is done): a reduce-or over the batch,
-which the partitioner turns into an all-reduce of one boolean per iteration. All devices
-therefore run the same number of iterations, the global slowest member's, exactly what one device
-would run for the whole batch; finished members are frozen by the loop's select, so every member
-takes the same steps it would take on one device.
+``shard_map`` rather than a plain ``jit`` left to the SPMD partitioner (which also works, and
+was tried first): the partitioner turns the ``vmap``-ed adaptive ``while_loop``'s condition
+(the batch runs until its slowest member is done) into an all-reduce of one boolean per
+iteration, so every device runs until the globally slowest member is done. Under ``shard_map``
+there is no cross-device step at all, each device stops at its own slowest member, and a
+member's result depends only on the members that share its device: a sweep's forces come out
+bit-identical to the one-device sweep. (The fit's forward-mode model compiled this way rounds
+differently from its one-device compilation when a device holds two or more traces, which can
+flip an accept/reject decision at the model's tolerance; tests/test_sharding.py.)
 
 The batch is padded to a multiple of the device count (by repeating the last member; the padded
 rows are cut off again), since a sharded axis must split evenly.
