@@ -63,7 +63,8 @@ def main(argv=None):
     lines = [
         f"# Cost per step by substrate ({describe()})",
         "",
-        f"`python benchmarks/substrate_cost.py --repeat {args.repeat}`: `relax(100, 0.5, t_end=5)`, "
+        f"`python benchmarks/substrate_cost.py --repeat {args.repeat}`: "
+        "`relax(100, 0.5, t_end=5)`, "
         f"Settings(error_estimate=False, contact_radius=None): {mesh.r.size} nodes for all; "
         "build = the influence matrix (first time on this mesh), run = best of "
         f"{args.repeat}; load1 {os.getloadavg()[0]:.1f}.",

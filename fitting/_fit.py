@@ -44,6 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import lubjax
+from lubjax import _sharding
 from lubjax._threads import single_threaded_blas
 
 from . import _cache, _model, _stats
@@ -284,24 +285,47 @@ def _layout(groups, spec: ModelSpec, names_of_traces, theta0, shared) -> tuple[_
 
 
 class _Evaluator:
-    """(r, J, film) of every problem at given x, in one vmap-ed call over all traces."""
+    """(r, J, film) of every problem at given x, in one vmap-ed call over all traces.
 
-    def __init__(self, data, solver, spec, layout: _Layout, groups):
+    The trace axis is split over ``devices`` devices (lubjax/_sharding.py): the stacked data
+    and θ are padded to a multiple of the device count (repeating the last trace) and laid out
+    with ``NamedSharding(mesh, P("batch"))``, the solver (mesh arrays) replicated, and the one
+    jit-ed call is a ``shard_map`` of the vmap-ed model over the devices; the padded rows are
+    cut off. With one device nothing is padded or placed: the call is the plain jit of
+    before."""
+
+    def __init__(self, data, solver, spec, layout: _Layout, groups, devices: int = 1):
         self.data, self.solver, self.spec = data, solver, spec
         self.layout, self.groups = layout, groups
+        self.mesh = _sharding.batch_mesh(devices)
         self.rj = _cache.exported(f"residuals_and_jacobian {spec!r}",
-                                  _model.batched_functions(spec)[0])
+                                  _model.batched_functions(spec, self.mesh)[0])
         self.runs = 0
+        self.n_traces = len(layout.M)
+        self.pad = _sharding.padding(self.n_traces, devices)
+        self._placed = self.place(data, solver)  # the data do not change between iterations
+
+    def place(self, data, solver):
+        """(data, solver) padded and put on the mesh (unchanged with one device)."""
+        return (_sharding.shard_batch(_sharding.pad_leading(data, self.pad), self.mesh),
+                _sharding.replicate(solver, self.mesh))
+
+    def run(self, theta, placed=None):
+        """(r, J, film) as NumPy arrays of all traces at θ (n_traces × p), on ``placed`` data
+        and solver (default: the fit's own)."""
+        data, solver = self._placed if placed is None else placed
+        theta = _sharding.shard_batch(_sharding.pad_leading(np.asarray(theta), self.pad),
+                                      self.mesh)
+        with single_threaded_blas():
+            out = self.rj(jnp.asarray(theta), data, solver)
+            return tuple(_sharding.to_host(a)[: self.n_traces] for a in out)
 
     def thetas(self, xs):
         lay = self.layout
         return np.stack([lay.base[t] + lay.M[t] @ xs[lay.problem[t]] for t in range(len(lay.M))])
 
     def __call__(self, xs):
-        theta = self.thetas(xs)
-        with single_threaded_blas():
-            r, J, film = self.rj(jnp.asarray(theta), self.data, self.solver)
-            r, J, film = np.asarray(r), np.asarray(J), np.asarray(film)
+        r, J, film = self.run(self.thetas(xs))
         self.runs += 1
         out = []
         for members in self.groups:
@@ -561,11 +585,13 @@ def fit_traces(
     noise: str = "auto",
     model_error: bool = True,
     progress=None,
+    devices: int | None = None,
 ) -> list[FitResult]:
     """Fit traces: each on its own (default), or jointly with ``shared`` parameters.
 
     Every trace is evaluated in one vmap-ed model/Jacobian call per iteration (each takes its own
-    error-controlled steps on one shared mesh).
+    error-controlled steps on one shared mesh), the traces split over the devices (as
+    ``lubjax.sweep``: one SPMD program, lubjax/_sharding.py).
 
     Args:
         traces: :class:`fitting.Trace` objects (``read_trace``).
@@ -582,8 +608,10 @@ def fit_traces(
             of the covariance (:mod:`fitting._stats`).
         model_error: fold the solver's estimated error into the errors (:mod:`fitting._stats`).
         progress: optional callable(message) for progress lines (the CLI prints them).
+        devices: how many of ``jax.devices()`` the trace batch is split over (default: all).
     """
     _check_args(traces, method, max_iter, tol, starts)
+    n_dev = _sharding.device_count(devices)
     spec = _spec_for(traces, spec, drive,
                      dict(layer=layer, viscoelastic=viscoelastic, fit_offset=fit_offset))
     shared = tuple(shared)
@@ -605,7 +633,7 @@ def fit_traces(
                        for st, sc in zip(starts, scales, strict=True)])
     names = [_short_name(tr.name) for tr in traces]
     layout, x0s = _layout(groups, spec, names, theta0, shared)
-    evaluate = _Evaluator(data, solver, spec, layout, groups)
+    evaluate = _Evaluator(data, solver, spec, layout, groups, n_dev)
     n_samples = [sum(traces[t].time.size for t in g) for g in groups]
 
     def report(it, cost, done):
@@ -653,19 +681,23 @@ def _solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, groups):
     so both grow by the same factor and y_coarse,8rtol - y ≈ 3 (error of y): the error is
     (y_coarse,8rtol - y)/3, the estimate ``lubjax.relax`` makes in two runs, in one. In residual
     units (r = w (y - y_data)/σ) that is (r_coarse,8rtol - r)/3; the run is the fit's own
-    residual function on the other solver."""
+    model (the response only: no Jacobian) on the other solver."""
     settings = _model.FIT_SETTINGS if settings is None else settings
     mesh = settings.mesh().coarsened()
     tol = settings.tolerance()
     loose = _model.Solver(lubjax.discretise(mesh), dataclasses.replace(tol, rtol=min(8 * tol.rtol,
                                                                                        0.1)))
     data = _stack_traces(traces, scales, spec, mesh)
-    theta = jnp.asarray(evaluate.thetas(xs))
     # The response alone (no Jacobian): a forward run, a quarter of the cost and of the tracing.
-    predict = _cache.exported(f"predict {spec!r}", _model.batched_functions(spec)[1])
+    predict = _cache.exported(f"predict {spec!r}",
+                              _model.batched_functions(spec, evaluate.mesh)[1])
+    placed_data, placed_solver = evaluate.place(data, loose)
+    theta = _sharding.shard_batch(
+        _sharding.pad_leading(np.asarray(evaluate.thetas(xs)), evaluate.pad), evaluate.mesh)
     with single_threaded_blas():
-        y_loose = predict(theta, data, loose)[0]
-        r_loose = np.array(data.weight * (y_loose - data.response) / data.noise[:, None])
+        y_loose = predict(jnp.asarray(theta), placed_data, placed_solver)[0]
+        y_loose = _sharding.to_host(y_loose)[: evaluate.n_traces]
+    r_loose = np.array(data.weight * (y_loose - data.response) / data.noise[:, None])
     err = (r_loose - r_fit) / 3.0
     err[~np.isfinite(err)] = 0.0
     return [np.concatenate([err[t] for t in g]) for g in groups]

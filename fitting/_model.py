@@ -59,6 +59,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import lubjax
+from lubjax import _sharding
 from lubjax._indenter import motion_start
 
 from ._io import Trace
@@ -452,13 +453,13 @@ def residuals_and_jacobian(theta, data: TraceData, solver: Solver, spec: ModelSp
 
 
 @functools.lru_cache(maxsize=16)
-def batched_functions(spec: ModelSpec):
+def batched_functions(spec: ModelSpec, mesh=None):
     """jit-compiled, trace-batched (r, J, film) and (y, film) for ``spec`` (vmap over θ and the
-    data; the solver is shared, its tolerance static)."""
-    rj = jax.jit(jax.vmap(functools.partial(residuals_and_jacobian, spec=spec),
-                          in_axes=(0, 0, None)))
-    pred = jax.jit(jax.vmap(functools.partial(predict, spec=spec), in_axes=(0, 0, None)))
-    return rj, pred
+    data; the solver is shared, its tolerance static). With a ``mesh`` (lubjax/_sharding.py)
+    the trace axis is split over its devices, the solver replicated."""
+    rj = jax.vmap(functools.partial(residuals_and_jacobian, spec=spec), in_axes=(0, 0, None))
+    pred = jax.vmap(functools.partial(predict, spec=spec), in_axes=(0, 0, None))
+    return tuple(jax.jit(_sharding.over_batch(f, mesh, (True, True, False))) for f in (rj, pred))
 
 
 def stack(datas: list[TraceData]) -> TraceData:

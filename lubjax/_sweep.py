@@ -1,4 +1,16 @@
-"""Batches of relaxation tests in one compiled, ``vmap``-ped call, sharded over JAX devices."""
+"""Batches of relaxation tests in one compiled, ``vmap``-ped call, sharded over JAX devices.
+
+The batch of (β, z̄0) pairs is padded to a multiple of the device count and laid out on a
+one-axis device mesh (``NamedSharding(mesh, P("batch"))``); the discretisation, drive, substrate,
+t̄_end and output times are replicated (``P()``). One ``jax.jit`` of a ``shard_map`` of the
+``vmap``-ped rollout then runs as one SPMD program: each device runs the one-device program on
+its slice, so a member's result is bit-identical to the one-device sweep (tests/test_sharding.py)
+and a device stops at its own slowest member. It is compiled ahead of time
+(``.lower(...).compile()``) so the compile time is reported apart, and cached per device count,
+mesh size, drive, output count, tolerance and batch size. The helpers and the reason several
+CPU host devices need ``PJRT_NPROC`` > N (jaxlib's batched LAPACK deadlocks a smaller XLA:CPU
+pool) are in :mod:`lubjax._sharding`; with one device the call is a plain ``jit``.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _sharding
 from ._indenter import RampHold, SampledTravel
 from ._solve import BETA_RANGE, Z0_RANGE, Settings, _check_x64, make_plan
 from ._stepper import DONE, evaluate, rollout
@@ -46,31 +59,31 @@ def _one(tol, disc, history, substrate, t_end, times, b, z):
     )
 
 
-# Sharding: the batch is split into one chunk per device and each chunk runs the same
-# single-device jit(vmap(rollout)) with its inputs committed to that device. No SPMD
-# partitioning, so no cross-device step: an SPMD version (jit with NamedSharding, or shard_map)
-# hung on forced host devices.
 @functools.lru_cache(maxsize=8)
 def _batched(tol):
     one = functools.partial(_one, tol)
-    return jax.jit(jax.vmap(one, in_axes=(None, None, None, None, None, 0, 0)))
-
+    return jax.vmap(one, in_axes=(None, None, None, None, None, 0, 0))
 
 
 _COMPILED: dict = {}
 
 
-def _compiled_for(tol, args, device):
-    """AOT-compile once per (device, mesh size, history, output count, tolerance, chunk size);
-    returns (fn, seconds)."""
+def _compiled_for(tol, args, mesh):
+    """AOT-compile once per (device count, mesh size, drive, output count, tolerance, batch
+    size); returns (fn, seconds). With a mesh the shared inputs are replicated and β, z̄0 and
+    every output split over it: one jit of a shard_map, one SPMD program for all devices
+    (lubjax/_sharding.py)."""
     disc, history, substrate, _, times, b, _ = args
     leaves, treedef = jax.tree_util.tree_flatten((history, substrate))
     shapes = tuple(np.shape(x) for x in leaves)
-    key = (device.id, disc.r.shape[0], treedef, shapes, times.shape[0], tol, b.shape[0])
+    n_dev = 1 if mesh is None else mesh.size
+    key = (n_dev, disc.r.shape[0], treedef, shapes, times.shape[0], tol, b.shape[0])
     if key in _COMPILED:
         return _COMPILED[key], 0.0
+    batched = (False,) * 5 + (True, True)  # shared inputs, then β and z̄0
+    fn = jax.jit(_sharding.over_batch(_batched(tol), mesh, batched))
     start = time.perf_counter()
-    _COMPILED[key] = _batched(tol).lower(*args).compile()
+    _COMPILED[key] = fn.lower(*args).compile()
     return _COMPILED[key], time.perf_counter() - start
 
 
@@ -92,8 +105,9 @@ def sweep(
     ``while_loop``: the batch runs until its slowest member is done) and reports F̄ and min h̄
     at the shared output ``times`` (default 501 equally spaced) by its own interpolant; any
     ``drive`` (shared by the batch) instead of the travel ``history``, and any ``substrate``. The
-    batch is padded to a multiple of the device count and split across ``devices`` (default:
-    all of ``jax.devices()``). Failed runs are flagged in ``ok`` rather than raised, so one bad
+    batch is padded to a multiple of the device count and sharded across ``devices`` (default:
+    all of ``jax.devices()``; several CPU host devices need ``PJRT_NPROC`` > ``devices``,
+    lubjax/_sharding.py). Failed runs are flagged in ``ok`` rather than raised, so one bad
     corner does not discard a map.
 
     Example: a regime map over a grid, ``B, Z = np.meshgrid(betas, z0s); sweep(B, Z)``, then
@@ -110,42 +124,26 @@ def sweep(
             raise ValueError(
                 f"{name} values must be finite and in [{lo:g}, {hi:g}], got {v[~good][:3]}"
             )
-    n_dev = len(jax.devices()) if devices is None else int(devices)
-    if not 1 <= n_dev <= len(jax.devices()):
-        raise ValueError(f"devices must be in [1, {len(jax.devices())}], got {devices}")
+    n_dev = _sharding.device_count(devices)
     plan = make_plan(
         t_end, history=history, drive=drive, substrate=substrate, settings=settings, times=times
     )
-    pad = (-b.size) % n_dev
-    bp = np.concatenate([b, np.full(pad, b[-1])])
-    zp = np.concatenate([z, np.full(pad, z[-1])])
-    chunk = bp.size // n_dev
-    shared = (plan.disc, plan.drive, plan.substrate, plan.t_end, plan.t)
-    used = jax.devices()[:n_dev]
-    per_device = [
-        jax.device_put((*shared, bp[k * chunk:(k + 1) * chunk], zp[k * chunk:(k + 1) * chunk]), d)
-        for k, d in enumerate(used)
-    ]
-    # One executable per device (each is bound to its device's inputs), cached across calls;
-    # compile time reported apart (0 when cached).
-    compiled_and_time = [_compiled_for(plan.tol, args, d) for args, d in zip(per_device, used)]
-    compiled = [fn for fn, _ in compiled_and_time]
-    compile_s = sum(s for _, s in compiled_and_time)
+    # Pad to a multiple of the device count (a sharded axis splits evenly); cut off below.
+    pad = _sharding.padding(b.size, n_dev)
+    bp, zp = _sharding.pad_leading((b, z), pad)
+    mesh = _sharding.batch_mesh(n_dev)
+    args = (
+        *_sharding.replicate((plan.disc, plan.drive, plan.substrate, plan.t_end, plan.t), mesh),
+        *_sharding.shard_batch((bp, zp), mesh),
+    )
+    # Cached across calls; compile time reported apart (0 when cached).
+    compiled, compile_s = _compiled_for(plan.tol, args, mesh)
     start = time.perf_counter()
-    # Accelerators run their chunks concurrently (asynchronous dispatch). Host "devices" share
-    # the CPU's LAPACK, and concurrent calls into a single-threaded OpenBLAS
-    # (OPENBLAS_NUM_THREADS=1) deadlocked, so on CPU the chunks run one after another.
-    on_cpu = jax.devices()[0].platform == "cpu"
-    outs = []
     with single_threaded_blas():
-        for fn, args in zip(compiled, per_device):
-            outs.append(fn(*args))
-            if on_cpu:
-                jax.block_until_ready(outs[-1])
-        outs = jax.block_until_ready(outs)
+        outs = jax.block_until_ready(compiled(*args))
     run_s = time.perf_counter() - start
     force, film_min, gap, ok, steps = (
-        np.concatenate([np.asarray(o[i]) for o in outs])[: b.size] for i in range(5)
+        _sharding.to_host(o)[: b.size] for o in outs
     )
     ok = ok & np.all(np.isfinite(force), axis=1)
     return SweepResult(b, z, plan.t, force, film_min, gap, ok, steps, compile_s, run_s, n_dev)

@@ -52,7 +52,9 @@ def test_sweep_shards_across_two_host_devices():
         print("ok")
         """
     )
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    # PJRT_NPROC=3: one intra-op thread more than device programs, else jaxlib's batched LAPACK
+    # deadlocks the host pool (lubjax/_sharding.py).
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", PJRT_NPROC="3")
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert proc.stdout.strip().endswith("ok")
