@@ -4,11 +4,12 @@
 
 Issue "Substrates": the layer's matrix is built once per (mesh, H̄, ν) and a layered run should
 cost the same per step as a half-space run; a viscoelastic step within 1.5×. One scene (β = 100,
-z̄0 = 0.5, t̄ ≤ 5, default Settings with the estimate off, the plain mesh so that every substrate
-runs on the same nodes) per substrate, in this process: the influence matrix's build time (a
-fresh mesh cache), the first call's compile time, the best of ``--repeat`` run times, the
-attempts (accepted + rejected) and the run time per attempt against the half-space's, measured
-in the same run. Writes benchmarks/out/substrate_cost.md with the machine and its load.
+z̄0 = 0.5, t̄ ≤ 5, default Settings with the estimate off, the plain mesh so that every
+substrate runs on the same nodes) per substrate, in this process: the influence matrix's build
+time (0 where an earlier row built it: matrices are cached per mesh and elastic geometry), the
+first call's compile time, the best of ``--repeat`` run times, the attempts (accepted +
+rejected) and the run time per attempt against the half-space's, measured in the same run.
+Writes benchmarks/out/substrate_cost.md with the machine and its load.
 """
 
 from __future__ import annotations
@@ -26,7 +27,6 @@ OUT = os.path.join(ROOT, "benchmarks", "out")
 def main(argv=None):
     import lubjax
     from benchmarks.machine import describe
-    from lubjax import _influence, _layer
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
@@ -46,9 +46,6 @@ def main(argv=None):
     rows = []
     for label, substrate in cases:
         print(label, "...", file=sys.stderr, flush=True)
-        for fn in (getattr(_influence, "_cached_matrix", None), getattr(_layer, "_cached", None)):
-            if fn is not None and hasattr(fn, "cache_clear"):
-                fn.cache_clear()
         start = time.perf_counter()
         lubjax.discretise(mesh, substrate)
         build = time.perf_counter() - start
@@ -66,7 +63,7 @@ def main(argv=None):
         f"`python benchmarks/substrate_cost.py --repeat {args.repeat}`: "
         "`relax(100, 0.5, t_end=5)`, "
         f"Settings(error_estimate=False, contact_radius=None): {mesh.r.size} nodes for all; "
-        "build = the influence matrix (first time on this mesh), run = best of "
+        "build = the influence matrix (0: cached from an earlier row), run = best of "
         f"{args.repeat}; load1 {os.getloadavg()[0]:.1f}.",
         "",
         "| substrate | build [s] | compile [s] | run [s] | accepted (rejected) | run per attempt "
