@@ -11,6 +11,7 @@ import dataclasses
 import json
 import math
 import sys
+import textwrap
 
 import numpy as np
 
@@ -157,12 +158,12 @@ def _add_substrate(p, dimensionless=False):
     si_only = " (SI mode)" if dimensionless else ""
     tau_units = ("[s] in SI mode, in t_c units with --beta/--z0 (as --t-end)" if dimensionless
                  else "[s]")
-    g = p.add_argument_group(
-        "substrate",
+    # the parser keeps descriptions as written (RawDescriptionHelpFormatter): wrap it here
+    g = p.add_argument_group("substrate", textwrap.fill(
         "The solver scales with the relaxed modulus: for a viscoelastic substrate E* (--E-star, "
         "or --E with --poisson) is the relaxed E*∞, the long-time modulus, and the Prony series "
         "E(t)/E∞ = 1 + Σ g_k exp(-t/τ_k) gives the instantaneous E*0 = E*∞ (1 + Σ g_k).",
-    )
+        76))
     g.add_argument("--substrate", choices=SUBSTRATES, default="halfspace",
                    help="elastic half-space (default), a layer of thickness --thickness on a rigid "
                    f"base{si_only}, or a viscoelastic solid (--prony-g, --prony-tau; on the layer "
