@@ -31,8 +31,9 @@ from ._files import (
 PROG = "lubjax"
 DESCRIPTION = (
     "Simulate a soft lubricated contact with the lubjax solver: a rigid sphere pushed into a "
-    "soft elastic half-space through a viscous film, then held (relax), pressed under a load "
-    "(creep), or a free sphere colliding with it (bounce). "
+    "soft elastic half-space (or a layer, or a viscoelastic solid: --substrate) through a "
+    "viscous film, then held (relax), pressed under a load (creep), or a free sphere colliding "
+    "with it (bounce). "
     "Also available as: python -m lubjax"
 )
 EPILOG = EXIT_EPILOG.format(failed="solver error, or an output could not be written")
