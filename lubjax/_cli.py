@@ -11,6 +11,7 @@ import dataclasses
 import json
 import math
 import sys
+import textwrap
 
 import numpy as np
 
@@ -30,8 +31,9 @@ from ._files import (
 PROG = "lubjax"
 DESCRIPTION = (
     "Simulate a soft lubricated contact with the lubjax solver: a rigid sphere pushed into a "
-    "soft elastic half-space through a viscous film, then held (relax), pressed under a load "
-    "(creep), or a free sphere colliding with it (bounce). "
+    "soft elastic half-space (or a layer, or a viscoelastic solid: --substrate) through a "
+    "viscous film, then held (relax), pressed under a load (creep), or a free sphere colliding "
+    "with it (bounce). "
     "Also available as: python -m lubjax"
 )
 EPILOG = EXIT_EPILOG.format(failed="solver error, or an output could not be written")
@@ -59,7 +61,8 @@ def _parser() -> Parser:
         help="end time: dimensionless (default 5), or in s in SI mode",
     )
     si = r.add_argument_group("SI mode")
-    si.add_argument("--E-star", type=float, help="plane-strain modulus E* [Pa]")
+    si.add_argument("--E-star", type=float, help="plane-strain modulus E* [Pa] (with --substrate "
+                    "viscoelastic: the relaxed E*∞)")
     si.add_argument("--E", type=float, help="Young's modulus [Pa] (with --poisson)")
     si.add_argument("--poisson", type=float, help="Poisson's ratio in (-1, 0.5] (with --E)")
     si.add_argument("--viscosity", type=float, help="film viscosity [Pa s]")
@@ -67,17 +70,7 @@ def _parser() -> Parser:
     si.add_argument("--speed", type=float, help="approach speed v0 [m/s]")
     si.add_argument("--indent", type=float, help="travel d_c [m]")
     si.add_argument("--gap", type=float, help="initial gap z0 [m]")
-    sub_ = r.add_argument_group("substrate")
-    sub_.add_argument("--substrate", choices=("halfspace", "layer"), default="halfspace",
-                      help="elastic half-space (default) or a layer of thickness --thickness on "
-                      "a rigid base (SI mode)")
-    sub_.add_argument("--thickness", type=positive_float,
-                      help="layer thickness H [m] (H/sqrt(R d_c) in the solver's units)")
-    sub_.add_argument("--layer-base", choices=LAYER_BASES, default=None,
-                      help="layer on its rigid base: bonded (default) or frictionless")
-    sub_.add_argument("--layer-poisson", type=float, default=None,
-                      help="Poisson ratio of the layer in (-1, 0.5] (default: --poisson if "
-                      "given, else 0.5)")
+    _add_substrate(r, dimensionless=True)
     r.add_argument(
         "--dr", type=positive_float, default=None, help="fine-zone mesh spacing (Settings.dr)"
     )
@@ -109,6 +102,7 @@ def _parser() -> Parser:
     c.add_argument("--hold", type=float, default=None, help="hold time after the ramp [s]")
     c.add_argument("--load-csv", help="a load history instead: CSV with time_s,force_N")
     c.add_argument("--gap", type=float, help="initial gap z0 [m]")
+    _add_substrate(c)
     _add_accuracy(c)
     add_debug_flag(c)
 
@@ -130,6 +124,7 @@ def _parser() -> Parser:
                    help="constant force toward the wall [N] (weight less buoyancy; default 0)")
     b.add_argument("--t-end", type=positive_float, default=None,
                    help="end time [s] (default 20 x0/V)")
+    _add_substrate(b)
     _add_accuracy(b)
     add_debug_flag(b)
     return p
@@ -137,7 +132,8 @@ def _parser() -> Parser:
 
 def _add_material(p):
     si = p.add_argument_group("material")
-    si.add_argument("--E-star", type=float, help="plane-strain modulus E* [Pa]")
+    si.add_argument("--E-star", type=float, help="plane-strain modulus E* [Pa] (with --substrate "
+                    "viscoelastic: the relaxed E*∞)")
     si.add_argument("--E", type=float, help="Young's modulus [Pa] (with --poisson)")
     si.add_argument("--poisson", type=float, help="Poisson's ratio in (-1, 0.5] (with --E)")
     si.add_argument("--viscosity", type=float, help="film viscosity [Pa s]")
@@ -151,6 +147,145 @@ def _add_accuracy(p):
                    help="attempted-step budget (Settings.max_steps)")
     p.add_argument("--out", help="write results as JSON here")
     p.add_argument("--plot", help="write a figure here (.png, .pdf, .svg, ...)")
+
+
+SUBSTRATES = ("halfspace", "layer", "viscoelastic")
+LAYER_OPTIONS = ("thickness", "layer_base", "layer_poisson")
+PRONY_OPTIONS = ("prony_g", "prony_tau")
+
+
+def _add_substrate(p, dimensionless=False):
+    """The substrate options, the same for every command (built by :func:`_substrate`)."""
+    si_only = " (SI mode)" if dimensionless else ""
+    tau_units = ("[s] in SI mode, in t_c units with --beta/--z0 (as --t-end)" if dimensionless
+                 else "[s]")
+    # the parser keeps descriptions as written (RawDescriptionHelpFormatter): wrap it here
+    g = p.add_argument_group("substrate", textwrap.fill(
+        "The solver scales with the relaxed modulus: for a viscoelastic substrate E* (--E-star, "
+        "or --E with --poisson) is the relaxed E*∞, the long-time modulus, and the Prony series "
+        "E(t)/E∞ = 1 + Σ g_k exp(-t/τ_k) gives the instantaneous E*0 = E*∞ (1 + Σ g_k).",
+        76))
+    g.add_argument("--substrate", choices=SUBSTRATES, default="halfspace",
+                   help="elastic half-space (default), a layer of thickness --thickness on a rigid "
+                   f"base{si_only}, or a viscoelastic solid (--prony-g, --prony-tau; on the layer "
+                   "if --thickness is given)")
+    g.add_argument("--thickness", type=positive_float,
+                   help="layer thickness H [m] (H/sqrt(R d_c) in the solver's units)")
+    g.add_argument("--layer-base", choices=LAYER_BASES, default=None,
+                   help="layer on its rigid base: bonded (default) or frictionless")
+    g.add_argument("--layer-poisson", type=float, default=None,
+                   help="Poisson ratio of the layer in (-1, 0.5] (default: --poisson if "
+                   "given, else 0.5)")
+    g.add_argument("--prony-g", metavar="G1[,G2...]", default=None,
+                   help="Prony modulus weights g_k = E_k/E∞ > 0 (dimensionless, relative to the "
+                   "relaxed modulus; E0/E∞ = 1 + sum)")
+    g.add_argument("--prony-tau", metavar="TAU1[,TAU2...]", default=None,
+                   help=f"Prony relaxation times τ_k > 0, distinct, one per weight, {tau_units}")
+
+
+def _option(name):
+    return "--" + name.replace("_", "-")
+
+
+def _prony_list(args, name, what):
+    """The comma-separated numbers of --prony-g/--prony-tau, each finite and > 0."""
+    text = getattr(args, name)
+    values = []
+    for k, cell in enumerate(text.split(","), 1):
+        try:
+            v = float(cell)
+        except ValueError:
+            raise UsageError(f"{_option(name)}: term {k} is not a number: {cell.strip()!r} "
+                             f"(give {what}, comma-separated)") from None
+        if not (math.isfinite(v) and v > 0):
+            raise UsageError(f"{_option(name)}: term {k} must be a finite number > 0 ({what}), "
+                             f"got {cell.strip()}")
+        values.append(v)
+    return values
+
+
+def _substrate(args, settings, scale):
+    """The substrate from the substrate options, as (substrate or None for the half-space, its
+    JSON record, a line for the summary or None); every mistake a UsageError naming the option,
+    before anything is computed. ``scale``: (R [m], d_c [m], t_c [s]) of the run, or None in
+    dimensionless mode (lengths in metres are then refused; times are in t_c units)."""
+    from ._layer import k_nodes, layer_thickness_bar
+    from ._substrate import Layer, Viscoelastic
+
+    kind = args.substrate
+    layer_given = [_option(n) for n in LAYER_OPTIONS if getattr(args, n) is not None]
+    prony_given = [_option(n) for n in PRONY_OPTIONS if getattr(args, n) is not None]
+    if kind == "halfspace" and layer_given:
+        raise UsageError(f"{', '.join(layer_given)}: only with --substrate layer (or "
+                         "viscoelastic on a layer)")
+    if kind != "viscoelastic" and prony_given:
+        raise UsageError(f"{', '.join(prony_given)}: only with --substrate viscoelastic")
+    if kind == "layer" and args.thickness is None:
+        raise UsageError("--substrate layer needs --thickness H (metres)")
+    if kind == "viscoelastic":
+        missing = [_option(n) for n in PRONY_OPTIONS if getattr(args, n) is None]
+        if missing:
+            raise UsageError("--substrate viscoelastic needs " + " and ".join(missing)
+                             + " (--prony-g G1[,G2...] --prony-tau TAU1[,TAU2...])")
+        if layer_given and args.thickness is None:
+            raise UsageError(f"{', '.join(layer_given)}: with --substrate viscoelastic only "
+                             "together with --thickness (the layer under the viscoelastic solid)")
+
+    layer, record, line = None, {"kind": "halfspace"}, None
+    if args.thickness is not None:
+        if scale is None:
+            raise UsageError("--thickness is in metres: give the SI parameters (--E-star, "
+                             "--viscosity, --radius, --speed, --indent, --gap), not --beta/--z0")
+        radius, d_c, _ = scale
+        nu = args.layer_poisson
+        if nu is None:
+            nu = args.poisson if args.poisson is not None else 0.5
+        if not (math.isfinite(nu) and -1.0 < nu <= 0.5):
+            raise UsageError(f"--layer-poisson must be in (-1, 0.5], got {nu:g}")
+        layer = Layer(layer_thickness_bar(args.thickness, radius, d_c), nu,
+                      args.layer_base or "bonded")
+        try:  # the matrix's cost depends on the mesh length only: refuse a too thin layer now
+            k_nodes(settings.mesh(), layer.thickness, layer.poisson, layer.interface)
+        except ValueError as exc:
+            raise UsageError(f"--thickness {args.thickness:g} m: {exc}") from None
+        record = {"kind": "layer", "thickness_m": args.thickness, "thickness_bar": layer.thickness,
+                  "poisson": layer.poisson, "base": layer.interface}
+        line = (f"{layer.interface} layer H = {args.thickness:g} m "
+                f"(H/sqrt(R d_c) = {layer.thickness:.4g}), poisson {layer.poisson:g}")
+    if kind != "viscoelastic":
+        return layer, record, line
+
+    g = _prony_list(args, "prony_g", "weights E_k/E∞")
+    tau = _prony_list(args, "prony_tau", "times in s" if scale else "times in t_c units")
+    if len(g) != len(tau):
+        raise UsageError(f"--prony-g has {len(g)} term(s) and --prony-tau {len(tau)}: give one "
+                         "relaxation time per weight")
+    if len(set(tau)) != len(tau):
+        raise UsageError("--prony-tau: the relaxation times must be distinct, got "
+                         f"{args.prony_tau}")
+    t_c = scale[2] if scale else 1.0
+    tau_bar = [t / t_c for t in tau]
+    try:
+        solid = Viscoelastic.from_prony(g, tau_bar, elastic=layer)
+    except ValueError as exc:  # the exact conversion to the compliance form failed
+        raise UsageError(f"--prony-g/--prony-tau: {exc}") from None
+    record = {
+        "kind": "viscoelastic",
+        "modulus": "E* is the relaxed modulus E*inf; E*0 = E*inf (1 + sum g)",
+        "prony_g": g,
+        "prony_tau_s": tau if scale else None,
+        "prony_tau_bar": tau_bar,
+        "E0_over_Einf": 1.0 + sum(g),
+        "retardation": solid.retardation.tolist(),
+        "retardation_times_bar": solid.times.tolist(),
+        "elastic": record,
+    }
+    unit = "s" if scale else "t_c"
+    line = (f"viscoelastic, {len(g)} Prony term(s), E*0/E*inf = {1 + sum(g):.4g}, tau = "
+            + ", ".join(f"{t:.4g}" for t in tau) + f" {unit} (t_c units: "
+            + ", ".join(f"{t:.4g}" for t in tau_bar) + "), on "
+            + (line if line else "the half-space"))
+    return solid, record, line
 
 
 def _modulus(args) -> float:
@@ -285,13 +420,18 @@ def _creep(args) -> int:
     _check_thin("the Hertz indentation under the load", test.indent, test.radius)
     check_parameters(test.beta, test.z0_bar)
     settings = _settings(args)
+    # d_c = the Hertz indentation at E* (the relaxed one if viscoelastic), t_c = the ramp time
+    substrate, record, line = _substrate(args, settings,
+                                         (test.radius, test.indent, test.time_scale))
     prepare_outputs(outputs)
     profile_times = sorted({min(1.0, t_end), t_end})
+    if line:
+        print(f"substrate: {line}")
     res = relax(test.beta, test.z0_bar, t_end, drive=test.drive(history), settings=settings,
-                profile_times=profile_times)
+                profile_times=profile_times, substrate=substrate)
     out = _drive_json(res, test.scales, test.gap)
     out.update(load_N=test.load, hertz_indentation_m=test.indent,
-               settings=dataclasses.asdict(settings))
+               settings=dataclasses.asdict(settings), substrate=record)
     d = test.indent
     print(
         f"creep: beta={test.beta:.4g} z0={test.z0_bar:.4g} (d_c = Hertz indentation "
@@ -323,9 +463,13 @@ def _bounce(args) -> int:
     check_parameters(test.beta, 1.0)
     t_end = 20.0 if args.t_end is None else args.t_end / test.time_scale
     settings = _settings(args)
+    # d_c = the gap x0, t_c = x0/V
+    substrate, record, line = _substrate(args, settings, (test.radius, test.gap, test.time_scale))
     prepare_outputs(outputs)
+    if line:
+        print(f"substrate: {line}")
     res = relax(test.beta, 1.0, t_end, drive=test.drive(), settings=settings,
-                profile_times=[t_end])
+                profile_times=[t_end], substrate=substrate)
     e = restitution(res)
     out = _drive_json(res, test.scales, test.gap)
     v = test.speed
@@ -338,6 +482,7 @@ def _bounce(args) -> int:
         elasticity_davis=test.elasticity,
         mass_kg=mass,
         settings=dataclasses.asdict(settings),
+        substrate=record,
     )
     print(
         f"bounce: St={test.stokes:.4g}, beta={test.beta:.4g} (Davis et al.'s epsilon "
@@ -389,37 +534,6 @@ def _si_test(args):
     return test
 
 
-def _layer(args, test, settings):
-    """The substrate from --substrate/--thickness/--layer-base/--layer-poisson (None: the
-    half-space); every mistake a UsageError before anything is computed."""
-    from ._layer import k_nodes, layer_thickness_bar
-    from ._substrate import Layer
-
-    if args.substrate != "layer":
-        given = [f"--{n.replace('_', '-')}" for n in ("thickness", "layer_base", "layer_poisson")
-                 if getattr(args, n) is not None]
-        if given:
-            raise UsageError(f"{', '.join(given)}: only with --substrate layer")
-        return None
-    if args.thickness is None:
-        raise UsageError("--substrate layer needs --thickness H (metres)")
-    if test is None:
-        raise UsageError("--thickness is in metres: give the SI parameters (--E-star, "
-                         "--viscosity, --radius, --speed, --indent, --gap), not --beta/--z0")
-    nu = args.layer_poisson
-    if nu is None:
-        nu = args.poisson if args.poisson is not None else 0.5
-    if not (math.isfinite(nu) and -1.0 < nu <= 0.5):
-        raise UsageError(f"--layer-poisson must be in (-1, 0.5], got {nu:g}")
-    thickness = layer_thickness_bar(args.thickness, test.radius, test.indent)
-    layer = Layer(thickness, nu, args.layer_base or "bonded")
-    try:  # the matrix's cost depends on the mesh length only: refuse a too thin layer now
-        k_nodes(settings.mesh(), layer.thickness, layer.poisson, layer.interface)
-    except ValueError as exc:
-        raise UsageError(f"--thickness {args.thickness:g} m: {exc}") from None
-    return layer
-
-
 def _relax(args) -> int:
     from ._solve import Settings, check_parameters, relax
 
@@ -442,11 +556,12 @@ def _relax(args) -> int:
     given = [("dr", args.dr), ("rtol", args.rtol), ("order", args.order),
              ("max_steps", args.max_steps)]
     settings = Settings(**{k: v for k, v in given if v is not None})
-    layer = _layer(args, test, settings)
+    scale = (test.radius, test.indent, test.time_scale) if test else None
+    substrate, record, line = _substrate(args, settings, scale)
     profile_times = [t for t in (0.25, 0.5, 1.0, 2.0, t_end) if t <= t_end]
     prepare_outputs(outputs)
     res = relax(beta, z0, t_end, settings=settings, profile_times=profile_times,
-                substrate=layer)
+                substrate=substrate)
     out = {
         "beta": beta,
         "z0": z0,
@@ -463,9 +578,7 @@ def _relax(args) -> int:
         "rejected_steps": res.rejected,
         "ok": res.ok,
         "settings": dataclasses.asdict(settings),
-        "substrate": {"kind": "halfspace"} if layer is None else {
-            "kind": "layer", "thickness_m": args.thickness, "thickness_bar": layer.thickness,
-            "poisson": layer.poisson, "base": layer.interface},
+        "substrate": record,
     }
     if test:
         out.update(
@@ -479,9 +592,8 @@ def _relax(args) -> int:
                 "pressure_Pa": test.pressure_scale,
             },
         )
-    if layer is not None:
-        print(f"substrate: {layer.interface} layer H = {args.thickness:g} m "
-              f"(H/sqrt(R d_c) = {layer.thickness:.4g}), poisson {layer.poisson:g}")
+    if line:
+        print(f"substrate: {line}")
     print(
         f"beta={beta:.4g} z0={z0:.4g}: F(t_end)={res.force[-1]:.5g}, peak F={res.force.max():.5g}, "
         f"min film={res.film_min.min():.3g}; estimated error {np.nanmax(res.force_error):.2g}; "

@@ -110,6 +110,8 @@ def trace(tmp_path):
 
 DIM = ["relax", "--beta", "100", "--z0", "0.5"]
 LAYER = ["--substrate", "layer", "--thickness"]
+VISCO = ["--substrate", "viscoelastic"]
+PRONY = ["--prony-g", "1", "--prony-tau", "1"]
 
 RELAX_USAGE = [
     # (argv, expected message fragment) -- item 5, 8, 9 of the issue
@@ -158,6 +160,32 @@ RELAX_USAGE = [
     (["relax"] + SI + LAYER + ["5e-3", "--layer-base", "glued"], "--layer-base: invalid choice"),
     (["relax"] + SI + ["--substrate", "brick"], "argument --substrate: invalid choice"),
     (["relax"] + SI + LAYER + ["1e-6"], "1e-06 m: Layer thickness H̄ = 0.00188982 is too thin"),
+    # viscoelastic substrate (issue 10, item 5): Prony options only with it, and all of them
+    (DIM + PRONY, "--prony-g, --prony-tau: only with --substrate viscoelastic"),
+    (["relax"] + SI + LAYER + ["5e-3", "--prony-tau", "1"],
+     "--prony-tau: only with --substrate viscoelastic"),
+    (DIM + VISCO, "--substrate viscoelastic needs --prony-g and --prony-tau"),
+    (DIM + VISCO + ["--prony-g", "1"], "--substrate viscoelastic needs --prony-tau"),
+    (DIM + VISCO + ["--prony-g", "1,0", "--prony-tau", "1,2"],
+     "--prony-g: term 2 must be a finite number > 0 (weights E_k/E∞), got 0"),
+    (DIM + VISCO + ["--prony-g", "-0.5", "--prony-tau", "1"],
+     "--prony-g: term 1 must be a finite number > 0"),
+    (DIM + VISCO + ["--prony-g", "nan", "--prony-tau", "1"],
+     "--prony-g: term 1 must be a finite number > 0"),
+    (DIM + VISCO + ["--prony-g", "1,x", "--prony-tau", "1,2"], "--prony-g: term 2 is not a number"),
+    (["relax"] + SI + VISCO + ["--prony-g", "1", "--prony-tau", "0"],
+     "--prony-tau: term 1 must be a finite number > 0 (times in s), got 0"),
+    (DIM + VISCO + ["--prony-g", "1", "--prony-tau", "-2"],
+     "--prony-tau: term 1 must be a finite number > 0 (times in t_c units)"),
+    (DIM + VISCO + ["--prony-g", "1,0.5", "--prony-tau", "1"],
+     "--prony-g has 2 term(s) and --prony-tau 1: give one relaxation time per weight"),
+    (DIM + VISCO + ["--prony-g", "1,0.5", "--prony-tau", "1,1"],
+     "--prony-tau: the relaxation times must be distinct"),
+    (DIM + VISCO + PRONY + ["--thickness", "5e-3"], "--thickness is in metres: give the SI"),
+    (["relax"] + SI + VISCO + PRONY + ["--layer-base", "frictionless"],
+     "--layer-base: with --substrate viscoelastic only together with --thickness"),
+    (["relax"] + SI + VISCO + PRONY + ["--thickness", "1e-6"], "1e-06 m: Layer thickness H̄"),
+    (DIM + ["--thickness", "5e-3", "--prony-g", "1"], "--thickness: only with --substrate layer"),
 ]
 
 
@@ -275,6 +303,65 @@ def test_relax_passes_the_layer_to_the_solver(tmp_path, monkeypatch, capsys):
     assert json.loads(out.read_text())["substrate"]["thickness_bar"] == pytest.approx(9.449, 1e-3)
     assert "frictionless layer H = 0.005 m" in capsys.readouterr().out
     assert lcli.main(DIM) == 0 and seen["substrate"] is None  # the half-space by default
+
+
+def test_relax_passes_the_viscoelastic_solid_to_the_solver(tmp_path, monkeypatch, capsys):
+    """--substrate viscoelastic: the Prony times in s become t_c units (t_c = d_c/v0 = 1.4 s
+    here), g_k = E_k/E∞ is from_prony's convention (so Σ g ≥ 1 is fine: E0/E∞ = 1 + Σ g), the
+    elastic part is the layer with --thickness, and --beta/--z0 takes the times in t_c units."""
+    seen = {}
+
+    def fake(*args, **kwargs):
+        seen.update(kwargs)
+        return _fake_result()
+
+    monkeypatch.setattr(lsolve, "relax", fake)
+    out = tmp_path / "run.json"
+    argv = ["relax"] + SI + VISCO + ["--prony-g", "2,0.5", "--prony-tau", "0.7,7",
+                                     "--out", str(out)]
+    assert lcli.main(argv) == 0
+    solid = seen["substrate"]
+    ref = lubjax.Viscoelastic.from_prony([2.0, 0.5], [0.5, 5.0])
+    assert isinstance(solid, lubjax.Viscoelastic) and isinstance(solid.elastic, lubjax.HalfSpace)
+    np.testing.assert_allclose(solid.retardation, ref.retardation, rtol=1e-12)
+    np.testing.assert_allclose(solid.times, ref.times, rtol=1e-12)
+    rec = json.loads(out.read_text())["substrate"]
+    assert rec["kind"] == "viscoelastic" and rec["elastic"] == {"kind": "halfspace"}
+    assert rec["prony_g"] == [2.0, 0.5] and rec["prony_tau_s"] == [0.7, 7.0]
+    assert rec["prony_tau_bar"] == pytest.approx([0.5, 5.0]) and rec["E0_over_Einf"] == 3.5
+    assert "relaxed" in rec["modulus"]
+    assert "E*0/E*inf = 3.5" in capsys.readouterr().out
+
+    argv = ["relax"] + SI + VISCO + PRONY + LAYER[2:] + ["5e-3", "--out", str(out)]
+    assert lcli.main(argv) == 0
+    assert seen["substrate"].elastic == lubjax.Layer(5e-3 / np.sqrt(2e-3 * 140e-6), 0.5)
+    rec = json.loads(out.read_text())["substrate"]
+    assert rec["elastic"]["kind"] == "layer" and rec["elastic"]["thickness_m"] == 5e-3
+
+    assert lcli.main(DIM + VISCO + ["--prony-g", "1", "--prony-tau", "2", "--out", str(out)]) == 0
+    np.testing.assert_allclose(seen["substrate"].times, [4.0])  # λ = τ(1 + g), τ in t_c units
+    rec = json.loads(out.read_text())["substrate"]
+    assert rec["prony_tau_s"] is None and rec["prony_tau_bar"] == [2.0]
+
+
+def test_relax_viscoelastic_peak_force_above_the_relaxed_half_space(tmp_path, capsys):
+    """End to end: during the ramp (t_c = 1.4 s, τ = 0.7 s) the solid is stiffer than its relaxed
+    modulus (up to E*0 = 2 E*∞), so the peak force exceeds the half-space's at E*∞ = --E-star,
+    and stays below the stiffest possible, the half-space at E*0."""
+    runs = {}
+    for name, extra in [("relaxed", []), ("instant", ["--E-star", "7.84e6"] + SI[2:]),
+                        ("visco", VISCO + ["--prony-g", "1", "--prony-tau", "0.7"])]:
+        out = tmp_path / f"{name}.json"
+        base = SI if name != "instant" else []
+        argv = ["relax"] + base + extra + ["--t-end", "2.8", "--rtol", "1e-3", "--dr", "0.1",
+                                           "--out", str(out)]
+        assert lcli.main(argv) == 0
+        runs[name] = json.loads(out.read_text())
+    peak = {k: max(v["force_N"]) for k, v in runs.items()}
+    assert runs["visco"]["substrate"]["kind"] == "viscoelastic"
+    assert runs["visco"]["substrate"]["prony_tau_bar"] == pytest.approx([0.5])
+    assert runs["relaxed"]["substrate"] == {"kind": "halfspace"}
+    assert 1.1 * peak["relaxed"] < peak["visco"] < peak["instant"]
 
 
 def _umask():

@@ -11,6 +11,8 @@ import lubjax._cli as lcli
 import lubjax._solve as lsolve
 
 MATERIAL = ["--E-star", "3.92e6", "--viscosity", "100", "--radius", "2e-3"]
+CREEP = ["creep", *MATERIAL, "--load", "0.03", "--ramp-time", "1", "--hold", "1", "--gap", "140e-6"]
+BOUNCE = ["bounce", *MATERIAL, "--mass", "1e-3", "--speed", "0.1", "--gap", "1e-4"]
 
 
 def _error(capsys):
@@ -85,6 +87,19 @@ def test_bounce_cli_reports_restitution(tmp_path):
           "--weight", "-1"], "--weight must be >= 0"),
         (["bounce", "--viscosity", "1", "--radius", "2e-3", "--mass", "1e-3", "--speed", "0.1",
           "--gap", "1e-4"], "--E-star"),
+        # the substrate options (shared with relax, issue 10 item 5)
+        ([*CREEP, "--thickness", "1e-3"], "--thickness: only with --substrate layer"),
+        ([*CREEP, "--prony-g", "1"], "--prony-g: only with --substrate viscoelastic"),
+        ([*CREEP, "--substrate", "viscoelastic", "--prony-tau", "1"],
+         "--substrate viscoelastic needs --prony-g"),
+        ([*CREEP, "--substrate", "layer"], "--substrate layer needs --thickness"),
+        ([*CREEP, "--substrate", "layer", "--thickness", "1e-7"], "Layer thickness H̄"),
+        ([*BOUNCE, "--substrate", "viscoelastic", "--prony-g", "1", "--prony-tau", "0"],
+         "--prony-tau: term 1 must be a finite number > 0 (times in s)"),
+        ([*BOUNCE, "--substrate", "viscoelastic", "--prony-g", "1,1", "--prony-tau", "1"],
+         "--prony-g has 2 term(s) and --prony-tau 1"),
+        ([*BOUNCE, "--substrate", "layer", "--thickness", "1e-3", "--layer-poisson", "0.6"],
+         "--layer-poisson must be in (-1, 0.5]"),
     ],
 )  # fmt: skip
 def test_bad_input_is_one_line_exit_2_before_running(argv, message, capsys, monkeypatch):
@@ -94,6 +109,53 @@ def test_bad_input_is_one_line_exit_2_before_running(argv, message, capsys, monk
     monkeypatch.setattr(lsolve, "relax", no_compute)
     assert lcli.main(argv) == 2
     assert message in _error(capsys)
+
+
+def test_creep_and_bounce_pass_the_substrate_in_their_own_units(monkeypatch, capsys):
+    """Each command's d_c and t_c convert the SI substrate options: creep d_c = the Hertz
+    indentation and t_c = the ramp time, bounce d_c = x0 and t_c = x0/V."""
+    seen = {}
+
+    def stop(*a, **k):  # record the solver call, then end the run as a solver failure
+        seen.update(k)
+        raise lsolve.SolverError("stand-in")
+
+    monkeypatch.setattr(lsolve, "relax", stop)
+    argv = [*CREEP, "--substrate", "viscoelastic", "--prony-g", "1", "--prony-tau", "0.5"]
+    assert lcli.main(argv) == 1
+    assert seen["substrate"].times == pytest.approx([1.0])  # λ = τ(1 + g)/t_c, t_c = 1 s
+    assert isinstance(seen["drive"], lubjax.Load)
+    delta = lubjax.hertz_indentation(3.92e6, 2e-3, 0.03)
+    argv = [*CREEP, "--substrate", "layer", "--thickness", "1e-3", "--layer-base", "frictionless"]
+    assert lcli.main(argv) == 1
+    assert seen["substrate"] == lubjax.Layer(1e-3 / np.sqrt(2e-3 * delta), 0.5, "frictionless")
+    argv = [*BOUNCE, "--substrate", "viscoelastic", "--prony-g", "1", "--prony-tau", "1e-3",
+            "--thickness", "2e-3"]
+    assert lcli.main(argv) == 1
+    solid = seen["substrate"]
+    assert solid.times == pytest.approx([2e-3 / (1e-4 / 0.1)])  # t_c = x0/V = 1 ms
+    assert solid.elastic == lubjax.Layer(2e-3 / np.sqrt(2e-3 * 1e-4), 0.5)
+    assert isinstance(seen["drive"], lubjax.FreeSphere)
+    assert "on bonded layer H = 0.002 m" in capsys.readouterr().out
+
+
+def test_creep_on_a_layer_approaches_less_than_on_the_half_space(tmp_path):
+    """End to end: under the same load (force control, so the force is the same) the layer on its
+    rigid base is stiffer than the half-space, so the sphere approaches less; the JSON records
+    the layer."""
+    data = {}
+    for name, extra in [("half", []), ("layer", ["--substrate", "layer", "--thickness", "1e-3"])]:
+        out = tmp_path / f"{name}.json"
+        assert lcli.main([*CREEP, "--rtol", "1e-3", "--out", str(out), *extra]) == 0
+        data[name] = json.loads(out.read_text())
+    delta = lubjax.hertz_indentation(3.92e6, 2e-3, 0.03)
+    assert data["half"]["substrate"] == {"kind": "halfspace"}
+    assert data["layer"]["substrate"] == {
+        "kind": "layer", "thickness_m": 1e-3, "poisson": 0.5, "base": "bonded",
+        "thickness_bar": pytest.approx(1e-3 / np.sqrt(2e-3 * delta))}
+    np.testing.assert_allclose(data["layer"]["force_N"][-1], 0.03, rtol=1e-9)
+    a_half, a_layer = data["half"]["approach_m"][-1], data["layer"]["approach_m"][-1]
+    assert a_layer < a_half - 0.1 * delta  # H/a ~ 4.4: a few μm less than the 25 μm indentation
 
 
 @pytest.mark.parametrize(
