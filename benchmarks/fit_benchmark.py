@@ -234,6 +234,9 @@ def joint():
 
 def _markdown(report):
     lines = [f"# Fit benchmark ({report['machine']})", ""]
+    env = {k: v for k, v in report.get("environment", {}).items() if v}
+    if env:
+        lines += ["environment: " + ", ".join(f"`{k}={v}`" for k, v in env.items()), ""]
     if "single" in report:
         s = report["single"]
         lines += ["## One fit of data/paper_dc140.csv (`lubjax-fit`, fresh process each)", "",
@@ -281,7 +284,10 @@ def main(argv=None):
     p.add_argument("--methods", default="lm,trf,lbfgs,optimistix")
     args = p.parse_args(argv)
     parts = args.only.split(",")
-    report = {"machine": _machine()}
+    # The device layout is the environment's (forced host devices need XLA_FLAGS and
+    # PJRT_NPROC before JAX starts): record it with the figures.
+    report = {"machine": _machine(), "environment": {
+        k: os.environ.get(k, "") for k in ("XLA_FLAGS", "PJRT_NPROC")}}
     if "single" in parts:
         report["single"] = single()
         print(json.dumps(report["single"]), flush=True)
