@@ -364,12 +364,12 @@ def test_a_layer_runs_a_smooth_start_on_the_default_mesh():
     1e-12 to 1e-10 for their runs, data/README). Diagnosed (per-attempt prints of the
     stepper): not rounding (refinement puts the solve's rounding of F̄ at ~1e-22): the film's
     error ratio stays ~1e-12 while every attempt above dt ~ 1e-14 moves F̄ from 1.41e-9 to
-    ~1e-8, which the force's Milne estimate rejects. Most likely a stiff mode: pressure the layer's
-    rigid base barely lets move the surface (so the film, the state, hardly sees it) relaxing
-    on a time scale ~1e-14; the early steps left the state off its slow manifold, a step longer
-    than that time scale jumps onto it, and the force test calls the jump an error. Remedy not
-    done: a filtered estimate (Shampine's (I - γΔt J)⁻¹ applied to the error, one more solve
-    with the step's factors) or controlling F̄ through the film only."""
+    ~1e-8, which the force's Milne estimate rejects. Cause not established. A stiff far-field
+    pressure mode (film ~ r̄²/2 ~ 10⁵ at L̄ ~ 600, mobility h̄³) that a longer step jumps across
+    was the first hypothesis, but over 25 accepted steps of 1e-15 F̄ moves by only 2e-5 (and
+    down), which a mode fast enough to jump at Δt ~ 1e-14 would not do. Tried and reverted: a
+    Shampine-filtered force estimate derived from the film's (it stalled the half-space too:
+    the film's far-field errors, relative to h̄ ~ 10⁵, map into large pressure errors)."""
     tau = 0.05 / 1.26  # the stage lag in units of t_c (d_c = 126 μm)
     s = np.linspace(0.0, 0.01, 2001)
     d = s - tau * (1 - np.exp(-s / tau))
