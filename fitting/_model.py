@@ -280,7 +280,8 @@ class TraceData(NamedTuple):
 
 
 class Solver(NamedTuple):
-    """What every trace of a batch shares: the mesh arrays and the tolerance (static)."""
+    """What every trace of a batch shares: the mesh arrays and the tolerance (its numbers are
+    leaves, its order and step budget static)."""
 
     disc: lubjax.Discretisation
     tol: lubjax.Tolerance
@@ -455,7 +456,7 @@ def residuals_and_jacobian(theta, data: TraceData, solver: Solver, spec: ModelSp
 @functools.lru_cache(maxsize=16)
 def batched_functions(spec: ModelSpec, mesh=None):
     """jit-compiled, trace-batched (r, J, film) and (y, film) for ``spec`` (vmap over θ and the
-    data; the solver is shared, its tolerance static). With a ``mesh`` (lubjax/_sharding.py)
+    data; the solver is shared, its tolerance an argument). With a ``mesh`` (lubjax/_sharding.py)
     the trace axis is split over its devices, the solver replicated."""
     rj = jax.vmap(functools.partial(residuals_and_jacobian, spec=spec), in_axes=(0, 0, None))
     pred = jax.vmap(functools.partial(predict, spec=spec), in_axes=(0, 0, None))
