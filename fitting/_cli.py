@@ -12,6 +12,7 @@ be written (``--debug`` shows the traceback).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
 import sys
@@ -200,8 +201,9 @@ def build_parser() -> Parser:
     p.add_argument("--layer-poisson", type=float, default=0.5,
                    help="Poisson ratio of the layer (default 0.5)")
     p.add_argument("--compare", action="store_true",
-                   help="also fit the richer viscoelastic model and report which one the data "
-                   "ask for (likelihood ratio, AIC, BIC)")
+                   help="also fit the other model and report which one the data ask for "
+                   "(likelihood ratio, AIC, BIC): with --substrate layer the half-space "
+                   "against the layer, otherwise the half-space against a viscoelastic solid")
     p.add_argument("--shared", help="joint fit: parameters shared by all traces, e.g. "
                    "E_star,viscosity (the others, and the offsets, are fitted per trace)")
     p.add_argument("--method", choices=METHODS, default="lm",
@@ -281,7 +283,11 @@ def _run(args) -> int:
         kw = dict(shared=shared, method=args.method, max_iter=args.max_iter, noise=args.noise,
                   progress=progress)
         if args.compare:
-            simple, rich, comparison = compare_models(traces, simple=spec, **kw)
+            # A layer is compared with the default it would replace (the half-space); the
+            # half-space with the viscoelastic solid.
+            pair = (dict(simple=dataclasses.replace(spec, layer=None), rich=spec)
+                    if spec.layer is not None else dict(simple=spec))
+            simple, rich, comparison = compare_models(traces, **pair, **kw)
             use_rich = comparison["choice"] == comparison["rich"]
             results, other = (rich, simple) if use_rich else (simple, rich)
         else:

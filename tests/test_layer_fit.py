@@ -20,7 +20,10 @@ The distinction is this clear because H̄ = 3.8; at the paper's H̄ ≈ 9.4 it i
 full trace (benchmarks/out/layer_fit_bias.md).
 """
 
+import json
 import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -65,3 +68,25 @@ def test_model_comparison_finds_the_layer_only_where_it_is():
     assert abs(s.values["E_star"] / true_e - 1) > 5 * s.stderr["E_star"] / true_e
     s, r, cmp = out["half-space data"]
     assert cmp["choice"] == cmp["simple"] and cmp["delta_bic"] < 0, cmp["report"]
+
+
+@pytest.mark.slow
+def test_the_cli_compares_the_layer_with_the_half_space(tmp_path):
+    """``lubjax-fit --substrate layer --thickness H --compare`` fits the half-space and the layer
+    (not a viscoelastic layer) and keeps the layer on layer data: the JSON's comparison names
+    both models and chooses the layer."""
+    src = tmp_path / "layer.csv"
+    fitting.write_trace(src, _noisy("layer2mm_dc140", 21))
+    out = tmp_path / "fit.json"
+    root = os.path.dirname(DATA)
+    proc = subprocess.run(
+        [sys.executable, "-m", "fitting", str(src), "--substrate", "layer", "--thickness",
+         str(LAYER_M), "--compare", "--no-cache", "--quiet", "--out", str(out)],
+        env=dict(os.environ, PYTHONPATH=root), capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(out.read_text())
+    cmp = report["comparison"]
+    assert cmp["simple"] == "elastic half-space", cmp
+    assert cmp["rich"].startswith("elastic layer") and cmp["choice"] == cmp["rich"], cmp
+    assert report["model"]["substrate"] == cmp["rich"]
+    assert report["alternative"]["model"]["substrate"] == "elastic half-space"
