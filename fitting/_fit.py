@@ -310,14 +310,15 @@ class _Evaluator:
         return (_sharding.shard_batch(_sharding.pad_leading(data, self.pad), self.mesh),
                 _sharding.replicate(solver, self.mesh))
 
-    def run(self, theta, placed=None):
-        """(r, J, film) as NumPy arrays of all traces at θ (n_traces × p), on ``placed`` data
-        and solver (default: the fit's own)."""
+    def run(self, theta, placed=None, fn=None):
+        """``fn`` (default the model's (r, J, film)) of all traces at θ (n_traces × p) as NumPy
+        arrays, on ``placed`` data and solver (default: the fit's own)."""
         data, solver = self._placed if placed is None else placed
+        fn = self.rj if fn is None else fn
         theta = _sharding.shard_batch(_sharding.pad_leading(np.asarray(theta), self.pad),
                                       self.mesh)
         with single_threaded_blas():
-            out = self.rj(jnp.asarray(theta), data, solver)
+            out = fn(jnp.asarray(theta), data, solver)
             return tuple(_sharding.to_host(a)[: self.n_traces] for a in out)
 
     def thetas(self, xs):
@@ -691,12 +692,7 @@ def _solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, groups):
     # The response alone (no Jacobian): a forward run, a quarter of the cost and of the tracing.
     predict = _cache.exported(f"predict {spec!r}",
                               _model.batched_functions(spec, evaluate.mesh)[1])
-    placed_data, placed_solver = evaluate.place(data, loose)
-    theta = _sharding.shard_batch(
-        _sharding.pad_leading(np.asarray(evaluate.thetas(xs)), evaluate.pad), evaluate.mesh)
-    with single_threaded_blas():
-        y_loose = predict(jnp.asarray(theta), placed_data, placed_solver)[0]
-        y_loose = _sharding.to_host(y_loose)[: evaluate.n_traces]
+    y_loose = evaluate.run(evaluate.thetas(xs), evaluate.place(data, loose), predict)[0]
     r_loose = np.array(data.weight * (y_loose - data.response) / data.noise[:, None])
     err = (r_loose - r_fit) / 3.0
     err[~np.isfinite(err)] = 0.0

@@ -283,9 +283,8 @@ def test_relax_writes_atomically_with_fake_run(tmp_path, monkeypatch, capsys):
     assert os.stat(out).st_mode & 0o777 == 0o666 & ~_umask()
 
 
-def test_relax_passes_the_layer_to_the_solver(tmp_path, monkeypatch, capsys):
-    """--substrate layer: H in metres becomes H̄ = H/√(R d_c) (9.45 for the paper's sample), the
-    layer's ν defaults to --poisson, and the JSON records the substrate."""
+def _recording_relax(monkeypatch):
+    """Replace the solver by a stand-in that records its keyword arguments (returned)."""
     seen = {}
 
     def fake(*args, **kwargs):
@@ -293,6 +292,13 @@ def test_relax_passes_the_layer_to_the_solver(tmp_path, monkeypatch, capsys):
         return _fake_result()
 
     monkeypatch.setattr(lsolve, "relax", fake)
+    return seen
+
+
+def test_relax_passes_the_layer_to_the_solver(tmp_path, monkeypatch, capsys):
+    """--substrate layer: H in metres becomes H̄ = H/√(R d_c) (9.45 for the paper's sample), the
+    layer's ν defaults to --poisson, and the JSON records the substrate."""
+    seen = _recording_relax(monkeypatch)
     out = tmp_path / "run.json"
     argv = (["relax", "--E", "2.94e6", "--poisson", "0.45"] + SI[2:]
             + LAYER + ["5e-3", "--layer-base", "frictionless", "--out", str(out)])
@@ -309,13 +315,7 @@ def test_relax_passes_the_viscoelastic_solid_to_the_solver(tmp_path, monkeypatch
     """--substrate viscoelastic: the Prony times in s become t_c units (t_c = d_c/v0 = 1.4 s
     here), g_k = E_k/E∞ is from_prony's convention (so Σ g ≥ 1 is fine: E0/E∞ = 1 + Σ g), the
     elastic part is the layer with --thickness, and --beta/--z0 takes the times in t_c units."""
-    seen = {}
-
-    def fake(*args, **kwargs):
-        seen.update(kwargs)
-        return _fake_result()
-
-    monkeypatch.setattr(lsolve, "relax", fake)
+    seen = _recording_relax(monkeypatch)
     out = tmp_path / "run.json"
     argv = ["relax"] + SI + VISCO + ["--prony-g", "2,0.5", "--prony-tau", "0.7,7",
                                      "--out", str(out)]
