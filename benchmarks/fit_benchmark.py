@@ -8,8 +8,8 @@
    the cold run), and with ``--no-cache``; plus the fit's own wall time (``wall_s``, without
    process start-up and imports).
 2. ``batch``: ``--batch`` noise draws (1 % of the peak) of the three clean paper traces, fitted
-   separately in one ``fit_traces`` call (one vmap over all traces per iteration), in a fresh
-   process with a warm cache; total wall time and how many converged near the truth.
+   separately in one ``fit_traces`` call (one batched call over all traces per iteration), in a
+   fresh process with a warm cache; total wall time and how many converged near the truth.
 3. ``joint``: the three paper traces fitted separately and jointly (E*, η shared).
 4. ``optimisers``: the hand-written Levenberg–Marquardt (``lm``) against
    ``scipy.optimize.least_squares`` (``trf``, with our Jacobian), ``optax.lbfgs`` (reverse-mode

@@ -285,7 +285,8 @@ def _layout(groups, spec: ModelSpec, names_of_traces, theta0, shared) -> tuple[_
 
 
 class _Evaluator:
-    """(r, J, film) of every problem at given x, in one vmap-ed call over all traces.
+    """(r, J, film) of every problem at given x, in one call over all traces (mapped or vmap-ed:
+    ``fitting._model.batching_mode``).
 
     The trace axis is split over ``devices`` devices (lubjax/_sharding.py): the stacked data
     and θ are padded to a multiple of the device count (repeating the last trace) and laid out
@@ -294,12 +295,13 @@ class _Evaluator:
     cut off. With one device nothing is padded or placed: the call is the plain jit of
     before."""
 
-    def __init__(self, data, solver, spec, layout: _Layout, groups, devices: int = 1):
+    def __init__(self, data, solver, spec, layout: _Layout, groups, devices: int = 1,
+                 batching: str = "auto"):
         self.data, self.solver, self.spec = data, solver, spec
         self.layout, self.groups = layout, groups
         self.mesh = _sharding.batch_mesh(devices)
-        self.rj = _cache.exported(f"residuals_and_jacobian {spec!r}",
-                                  _model.batched_functions(spec, self.mesh)[0])
+        self.mode = _model.batching_mode(batching)
+        self.rj = self.batched(0, "residuals_and_jacobian")
         self.runs = 0
         self.n_traces = len(layout.M)
         self.pad = _sharding.padding(self.n_traces, devices)
@@ -310,26 +312,47 @@ class _Evaluator:
         return (_sharding.shard_batch(_sharding.pad_leading(data, self.pad), self.mesh),
                 _sharding.replicate(solver, self.mesh))
 
-    def run(self, theta, placed=None, fn=None):
+    def batched(self, which: int, name: str):
+        """The batched model function ``which`` (0: (r, J, film), 1: (y, film)), through the
+        stored-program cache."""
+        return _cache.exported(f"{name} {self.mode} {self.spec!r}",
+                               _model.batched_functions(self.spec, self.mesh, self.mode)[which])
+
+    def run(self, theta, placed=None, fn=None, active=None):
         """``fn`` (default the model's (r, J, film)) of all traces at θ (n_traces × p) as NumPy
-        arrays, on ``placed`` data and solver (default: the fit's own)."""
+        arrays, on ``placed`` data and solver (default: the fit's own). ``active`` (bool per
+        trace, default all): with batching "map" the others are skipped and come back as
+        zeros; "vmap" computes them all."""
         data, solver = self._placed if placed is None else placed
         fn = self.rj if fn is None else fn
-        theta = _sharding.shard_batch(_sharding.pad_leading(np.asarray(theta), self.pad),
-                                      self.mesh)
+        active = np.ones(self.n_traces, bool) if active is None else np.asarray(active, bool)
+        # Padding rows repeat the last trace; they are skipped under "map".
+        active = np.concatenate([active, np.zeros(self.pad, bool)])
+        theta = _sharding.pad_leading(np.asarray(theta), self.pad)
+        theta, active = (_sharding.shard_batch(jnp.asarray(a), self.mesh) for a in (theta, active))
         with single_threaded_blas():
-            out = fn(jnp.asarray(theta), data, solver)
+            out = fn(theta, data, solver, active)
             return tuple(_sharding.to_host(a)[: self.n_traces] for a in out)
 
     def thetas(self, xs):
         lay = self.layout
         return np.stack([lay.base[t] + lay.M[t] @ xs[lay.problem[t]] for t in range(len(lay.M))])
 
-    def __call__(self, xs):
-        r, J, film = self.run(self.thetas(xs))
+    def __call__(self, xs, problems=None):
+        """(r, J, ok) per problem at x; only ``problems`` (indices; default all) are computed
+        where the batching can skip (the others' entries are then None)."""
+        wanted = np.zeros(len(self.groups), bool)
+        wanted[list(range(len(self.groups))) if problems is None else list(problems)] = True
+        active = np.zeros(self.n_traces, bool)
+        for k in np.flatnonzero(wanted):
+            active[self.groups[k]] = True
+        r, J, film = self.run(self.thetas(xs), active=active)
         self.runs += 1
         out = []
-        for members in self.groups:
+        for k, members in enumerate(self.groups):
+            if not wanted[k] and self.mode == "map":
+                out.append(None)
+                continue
             rk = np.concatenate([r[t] for t in members])
             Jk = np.concatenate([J[t] @ self.layout.M[t] for t in members])
             ok = bool(np.isfinite(rk).all() and np.isfinite(Jk).all() and all(
@@ -400,7 +423,7 @@ def _lm(evaluate: _Evaluator, x0s, n_samples, *, max_iter, tol, progress=None):
             iters[k] = it
         if done.all():
             break
-        new = evaluate(trial)
+        new = evaluate(trial, np.flatnonzero(~done))
         for k in np.flatnonzero(~done):
             r_try, _, ok = new[k]
             cost_try = 0.5 * float(r_try @ r_try) if ok else np.inf
@@ -444,7 +467,7 @@ def _single(evaluate: _Evaluator, k, x0s):
 
     def at(x):
         xs[k] = x
-        return evaluate(xs)[k]
+        return evaluate(xs, [k])[k]
 
     return at
 
@@ -587,12 +610,14 @@ def fit_traces(
     model_error: bool = True,
     progress=None,
     devices: int | None = None,
+    batching: str = "auto",
 ) -> list[FitResult]:
     """Fit traces: each on its own (default), or jointly with ``shared`` parameters.
 
-    Every trace is evaluated in one vmap-ed model/Jacobian call per iteration (each takes its own
-    error-controlled steps on one shared mesh), the traces split over the devices (as
-    ``lubjax.sweep``: one SPMD program, lubjax/_sharding.py).
+    Every trace is evaluated in one compiled model/Jacobian call per iteration (each takes its
+    own error-controlled steps on one shared mesh), the traces split over the devices (as
+    ``lubjax.sweep``: one SPMD program, lubjax/_sharding.py) and mapped or vmap-ed on each
+    (``batching``).
 
     Args:
         traces: :class:`fitting.Trace` objects (``read_trace``).
@@ -610,8 +635,12 @@ def fit_traces(
         model_error: fold the solver's estimated error into the errors (:mod:`fitting._stats`).
         progress: optional callable(message) for progress lines (the CLI prints them).
         devices: how many of ``jax.devices()`` the trace batch is split over (default: all).
+        batching: how each device evaluates its traces: "map" (one after another, each with its
+            own steps, finished fits skipped), "vmap" (all at once) or "auto" (default: "map" on
+            CPU, "vmap" on an accelerator; ``fitting._model.batching_mode``).
     """
     _check_args(traces, method, max_iter, tol, starts)
+    _model.batching_mode(batching)
     n_dev = _sharding.device_count(devices)
     spec = _spec_for(traces, spec, drive,
                      dict(layer=layer, viscoelastic=viscoelastic, fit_offset=fit_offset))
@@ -634,7 +663,7 @@ def fit_traces(
                        for st, sc in zip(starts, scales, strict=True)])
     names = [_short_name(tr.name) for tr in traces]
     layout, x0s = _layout(groups, spec, names, theta0, shared)
-    evaluate = _Evaluator(data, solver, spec, layout, groups, n_dev)
+    evaluate = _Evaluator(data, solver, spec, layout, groups, n_dev, batching)
     n_samples = [sum(traces[t].time.size for t in g) for g in groups]
 
     def report(it, cost, done):
@@ -690,8 +719,7 @@ def _solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, groups):
                                                                                        0.1)))
     data = _stack_traces(traces, scales, spec, mesh)
     # The response alone (no Jacobian): a forward run, a quarter of the cost and of the tracing.
-    predict = _cache.exported(f"predict {spec!r}",
-                              _model.batched_functions(spec, evaluate.mesh)[1])
+    predict = evaluate.batched(1, "predict")
     y_loose = evaluate.run(evaluate.thetas(xs), evaluate.place(data, loose), predict)[0]
     r_loose = np.array(data.weight * (y_loose - data.response) / data.noise[:, None])
     err = (r_loose - r_fit) / 3.0

@@ -42,9 +42,10 @@ Parameters θ (all of order one or logarithms): ln E*, ln η, ln z0, [ln(E0/E∞
 trace's noise level (:func:`noise_level`), so that Σr² is a χ² and traces of different noise
 weigh correctly in a joint fit.
 
-The Jacobian ∂r/∂θ is taken in forward mode (one ``jax.jvp`` per parameter, ``vmap``-ed)
-through the stepper's ``while_loop``: the tangents ride along with the factorisation, so the
-Jacobian costs about one run, and memory does not grow with the number of steps.
+The Jacobian ∂r/∂θ is taken in forward mode through the stepper's ``while_loop`` (one
+``jax.jvp`` per number the stepper sees, ``vmap``-ed: ln β and ln z0 for a prescribed travel;
+E* and η enter the stepper only through β): the tangents ride along with the factorisation, so
+the Jacobian costs about one run, and memory does not grow with the number of steps.
 """
 
 from __future__ import annotations
@@ -385,12 +386,6 @@ def history_size(trace: Trace, scales: Scales) -> int:
     return int(np.count_nonzero(trace.time >= scales.t_on))
 
 
-def dimensionless(theta, data: TraceData):
-    """(β, z̄0) from θ."""
-    beta = jnp.exp(theta[0] - theta[1] + data.log_beta_unit)
-    return beta, jnp.exp(theta[2]) / data.indent
-
-
 def _drive(spec: ModelSpec, data: TraceData, E_star):
     if spec.drive == "force":
         return lubjax.Load(data.drive_unit / E_star, data.history)
@@ -399,38 +394,68 @@ def _drive(spec: ModelSpec, data: TraceData, E_star):
     return lubjax.Travel(data.history)
 
 
-def _substrate(spec: ModelSpec, theta, data: TraceData):
+def _substrate(spec: ModelSpec, u, data: TraceData):
     """The substrate as the stepper sees it: a creep compliance (the geometry, half-space or
     layer, is the influence matrix in the discretisation, lubjax/_substrate.py). A layer's
     thickness H̄ differs per trace and is static in ``lubjax.Layer``, so traces of one batch
     carry their own influence matrix (``data.disc``) and share the half-space's compliance
-    type here: J ≡ 1, or the standard linear solid."""
+    type here: J ≡ 1, or the standard linear solid (its two parameters the last of ``u``)."""
     if not spec.viscoelastic:
         return lubjax.HalfSpace()
-    stiffening = 1.0 + jnp.exp(theta[3])
-    tau_bar = jnp.exp(theta[4]) / data.time_scale
+    stiffening = 1.0 + jnp.exp(u[-2])
+    tau_bar = jnp.exp(u[-1]) / data.time_scale
     return lubjax.Viscoelastic.standard_linear_solid(stiffening, tau_bar)
+
+
+def solver_inputs(theta, data: TraceData, spec: ModelSpec):
+    """u: what of θ the stepper sees, as one vector: ln β = ln E* - ln η + const, ln z0, then
+    ln E* where the drive carries it (load or spring: K̄, F̄ ∝ 1/E*), then the viscoelastic
+    ln(E0/E∞ - 1), ln τ. E* and η reach the stepper only through β (travel drive), so the
+    Jacobian needs 2 tangents through the stepper, not one per parameter
+    (:func:`residuals_and_jacobian`)."""
+    parts = [theta[0] - theta[1] + data.log_beta_unit, theta[2]]
+    if spec.drive != "travel":
+        parts.append(theta[0])
+    if spec.viscoelastic:
+        parts += [theta[3], theta[4]]
+    return jnp.stack(parts)
+
+
+def _stepper_output(u, data: TraceData, solver: Solver, spec: ModelSpec, mode: str = "forward"):
+    """The stepper's channel at the samples (F̄, or the gap z̄ under load control) and the
+    thinnest film min h̄ over the run (must stay > 0; -inf when the run did not reach its last
+    sample), from ``u`` (:func:`solver_inputs`). ``mode``: the rollout's (``"forward"``:
+    while_loop, jvp; ``"reverse"``: checkpointed scan, also ``jax.grad``)."""
+    beta = jnp.exp(u[0])
+    z0_bar = jnp.exp(u[1]) / data.indent
+    E_star = jnp.exp(u[2]) if spec.drive != "travel" else None
+    disc = solver.disc if data.disc is None else data.disc
+    traj = lubjax.rollout(
+        disc, beta, z0_bar, _drive(spec, data, E_star), data.t_end, solver.tol,
+        substrate=_substrate(spec, u, data), mode=mode,
+    )
+    channel = "force" if spec.response == "force" else "gap"
+    y = lubjax.evaluate(traj.steps, data.t_data, channel)
+    film = jnp.min(jnp.where(traj.steps.accepted, traj.steps.film_min, jnp.inf))
+    return y, jnp.where(traj.finished, film, -jnp.inf)
+
+
+def _response(theta, channel, data: TraceData, spec: ModelSpec):
+    """The model response [N or m] from the stepper's channel: F = E* F_s,unit F̄, or the
+    approach d = z0 - d_c z̄; plus the offset."""
+    if spec.response == "force":
+        y = jnp.exp(theta[0]) * data.force_scale_unit * channel
+    else:
+        y = data.indent * (jnp.exp(theta[2]) / data.indent - channel)
+    return y + theta[-1] * data.response_unit
 
 
 def predict(theta, data: TraceData, solver: Solver, spec: ModelSpec, mode: str = "forward"):
     """Model response at the samples [N or m], and the thinnest film min h̄ over the run (must
     stay > 0; -inf when the run did not reach its last sample). ``mode``: the rollout's
     (``"forward"``: while_loop, jvp; ``"reverse"``: checkpointed scan, also ``jax.grad``)."""
-    E_star = jnp.exp(theta[0])
-    beta, z0_bar = dimensionless(theta, data)
-    disc = solver.disc if data.disc is None else data.disc
-    traj = lubjax.rollout(
-        disc, beta, z0_bar, _drive(spec, data, E_star), data.t_end, solver.tol,
-        substrate=_substrate(spec, theta, data), mode=mode,
-    )
-    if spec.response == "force":
-        y = E_star * data.force_scale_unit * lubjax.evaluate(traj.steps, data.t_data, "force")
-    else:
-        y = data.indent * (z0_bar - lubjax.evaluate(traj.steps, data.t_data, "gap"))
-    y = y + theta[-1] * data.response_unit
-    film = jnp.min(jnp.where(traj.steps.accepted, traj.steps.film_min, jnp.inf))
-    film = jnp.where(traj.finished, film, -jnp.inf)
-    return y, film
+    channel, film = _stepper_output(solver_inputs(theta, data, spec), data, solver, spec, mode)
+    return _response(theta, channel, data, spec), film
 
 
 def residuals(theta, data: TraceData, solver: Solver, spec: ModelSpec):
@@ -440,27 +465,89 @@ def residuals(theta, data: TraceData, solver: Solver, spec: ModelSpec):
 
 
 def residuals_and_jacobian(theta, data: TraceData, solver: Solver, spec: ModelSpec):
-    """(r, J = ∂r/∂θ, min h̄) by forward mode: one jvp per parameter, batched with vmap."""
+    """(r, J = ∂r/∂θ, min h̄) by forward mode.
 
-    def f(th):
-        return residuals(th, data, solver, spec)
+    By the chain rule through u = u(θ) (:func:`solver_inputs`): one jvp of the stepper per
+    component of u (vmap-ed; 2 for a prescribed travel on an elastic solid, where θ has 4),
+    ∂c/∂θ = ∂c/∂u · ∂u/∂θ for the stepper's channel c, then the cheap response map's jvp in θ
+    and c together."""
+    u = solver_inputs(theta, data, spec)
+    du = jax.jacfwd(solver_inputs)(theta, data, spec)  # (m, p), exact and cheap
 
     def column(v):
-        (r, film), (dr, _) = jax.jvp(f, (theta,), (v,))
-        return r, film, dr
+        (c, film), (dc, _) = jax.jvp(
+            lambda x: _stepper_output(x, data, solver, spec), (u,), (v,)
+        )
+        return c, film, dc
 
-    r, film, cols = jax.vmap(column, out_axes=(None, None, 1))(jnp.eye(theta.shape[0]))
-    return r, cols, film
+    c, film, dc_du = jax.vmap(column, out_axes=(None, None, 1))(jnp.eye(u.shape[0]))
+    dc_dtheta = dc_du @ du
+
+    def res(th, ch):
+        return data.weight * (_response(th, ch, data, spec) - data.response) / data.noise
+
+    r = res(theta, c)
+    J = jax.vmap(lambda v, dc: jax.jvp(res, (theta, c), (v, dc))[1], in_axes=(0, 1),
+                 out_axes=1)(jnp.eye(theta.shape[0]), dc_dtheta)
+    return r, J, film
+
+
+#: How a batch of traces is evaluated: "map" (one after another on each device, lax.map) or
+#: "vmap" (all at once). "auto": "map" on CPU, "vmap" on an accelerator.
+BATCHING = ("auto", "map", "vmap")
+
+
+def batching_mode(batching: str = "auto") -> str:
+    """``"map"`` or ``"vmap"`` for ``batching`` (see :data:`BATCHING`).
+
+    Why not vmap on CPU: every member of a vmap-ed adaptive ``while_loop`` runs until the
+    batch's slowest member is done, and every ``lax.cond`` in the step (accept/reject,
+    restarts) becomes a select that computes both branches; on CPU the batched LU gains nothing
+    from the batch (it is a loop of LAPACK calls). A sequential ``lax.map`` lets each trace take
+    its own steps and skips the traces whose fit has ended (``active``). An accelerator is the
+    other way round: there the batch is what fills the device.
+    """
+    if batching not in BATCHING:
+        raise ValueError(f"batching must be one of {', '.join(BATCHING)}, got {batching!r}")
+    if batching == "auto":
+        return "map" if jax.default_backend() == "cpu" else "vmap"
+    return batching
+
+
+def _batched(fn, mode: str):
+    """``fn(θ, data, solver)`` over a leading trace axis of θ, data and ``active`` (bool per
+    trace). ``"map"``: one trace at a time, inactive traces skipped (their outputs zero);
+    ``"vmap"``: all at once, ``active`` ignored (a select could not skip the work)."""
+    if mode == "vmap":
+        many = jax.vmap(fn, in_axes=(0, 0, None))
+        return lambda theta, data, solver, active: many(theta, data, solver)
+
+    def run(theta, data, solver, active):
+        def one(args):
+            th, d, on = args
+            shapes = jax.eval_shape(fn, th, d, solver)
+            return jax.lax.cond(
+                on,
+                lambda: fn(th, d, solver),
+                lambda: jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes),
+            )
+
+        return jax.lax.map(one, (theta, data, active))
+
+    return run
 
 
 @functools.lru_cache(maxsize=16)
-def batched_functions(spec: ModelSpec, mesh=None):
-    """jit-compiled, trace-batched (r, J, film) and (y, film) for ``spec`` (vmap over θ and the
-    data; the solver is shared, its tolerance an argument). With a ``mesh`` (lubjax/_sharding.py)
-    the trace axis is split over its devices, the solver replicated."""
-    rj = jax.vmap(functools.partial(residuals_and_jacobian, spec=spec), in_axes=(0, 0, None))
-    pred = jax.vmap(functools.partial(predict, spec=spec), in_axes=(0, 0, None))
-    return tuple(jax.jit(_sharding.over_batch(f, mesh, (True, True, False))) for f in (rj, pred))
+def batched_functions(spec: ModelSpec, mesh=None, mode: str = "vmap"):
+    """jit-compiled, trace-batched (r, J, film) and (y, film) for ``spec``, functions of
+    (θ, data, solver, active): θ, the data and ``active`` carry the trace axis, the solver is
+    shared (its tolerance an argument). ``mode``: "map" or "vmap" (:func:`batching_mode`).
+    With a ``mesh`` (lubjax/_sharding.py) the trace axis is split over its devices, the solver
+    replicated, and each device maps or vmaps over its own traces."""
+    fns = (functools.partial(residuals_and_jacobian, spec=spec),
+           functools.partial(predict, spec=spec))
+    return tuple(jax.jit(_sharding.over_batch(_batched(f, mode), mesh, (True, True, False, True)))
+                 for f in fns)
 
 
 def stack(datas: list[TraceData]) -> TraceData:

@@ -86,13 +86,19 @@ def test_gradient_matches_central_differences():
         assert err <= 1e-3, (i, err)
 
 
-@pytest.mark.parametrize("spec", [SPEC, fitting.ModelSpec(viscoelastic=True)],
-                         ids=["elastic", "viscoelastic"])
-def test_residual_jacobian_is_forward_mode_and_consistent(spec):
-    tr, sc = _short("paper_dc126", 1.5)
+@pytest.mark.parametrize(
+    "spec, stem, z0",
+    [(SPEC, "paper_dc126", 126e-6), (fitting.ModelSpec(viscoelastic=True), "paper_dc126", 126e-6),
+     (fitting.ModelSpec(drive="force"), "creep_30mN", 140e-6)],
+    ids=["elastic", "viscoelastic", "load"])
+def test_residual_jacobian_is_forward_mode_and_consistent(spec, stem, z0):
+    """The Jacobian by the chain rule through the stepper's inputs (2 tangents for a travel on
+    an elastic solid, 3 under load control, 4 viscoelastic) against jax.jacfwd of the residuals
+    in all of θ."""
+    tr, sc = _short(stem, 1.5)
     solver = fitting.make_solver(COARSE)
     data = fitting.trace_data(tr, sc, spec, COARSE.mesh())
-    theta = [math.log(3.92e6), math.log(100.0), math.log(126e-6)]
+    theta = [math.log(3.92e6), math.log(100.0), math.log(z0)]
     theta = jnp.array(theta + ([math.log(0.3), math.log(0.5)] if spec.viscoelastic else []) + [0.0])
     r, J, film = jax.jit(fitting.residuals_and_jacobian, static_argnums=3)(
         theta, data, solver, spec)
@@ -206,6 +212,36 @@ def test_model_comparison_asks_for_viscoelasticity_only_when_it_is_there():
     _, _, cmp_plain = fitting.compare_models([plain], max_iter=25)
     assert cmp_plain["choice"] == cmp_plain["simple"], cmp_plain["report"]
     assert cmp_plain["delta_bic"] < 0 < cmp_visco["delta_bic"]
+
+
+def test_mapped_and_vmapped_batches_fit_alike_and_map_skips_finished_traces():
+    """batching="map" (each trace in turn, finished ones skipped) and "vmap" (all at once) are
+    two evaluations of one model: the fits agree to a small part of their errors (the two
+    compilations round differently, so steps may differ at the model's accuracy). A mapped call
+    asked for one problem computes only that one."""
+    traces = [_short(s, 2.0, clean=False)[0] for s in PAPER[:2]]
+    fits = {mode: fitting.fit_traces(traces, settings=COARSE, batching=mode, model_error=False)
+            for mode in ("map", "vmap")}
+    for a, b in zip(fits["map"], fits["vmap"], strict=True):
+        assert a.converged and b.converged
+        for n in ("E_star", "viscosity", "z0"):
+            assert abs(a.values[n] - b.values[n]) < 0.05 * a.stderr[n], n
+    from fitting import _fit, _model
+
+    spec = fitting.ModelSpec()
+    scales = [fitting.scales_from_trace(tr) for tr in traces]
+    data = _fit._stack_traces(traces, scales, spec, COARSE.mesh())
+    theta0 = np.array([[_model.to_theta(n, fits["map"][t].values[n], scales[t].response_unit)
+                        for n in spec.names] for t in range(2)])
+    groups = [[0], [1]]
+    layout, x0s = _fit._layout(groups, spec, ["a", "b"], theta0, ())
+    evaluate = _fit._Evaluator(data, fitting.make_solver(COARSE), spec, layout, groups,
+                               batching="map")
+    both, one = evaluate(x0s), evaluate(x0s, [1])
+    assert one[0] is None and both[0][2] and one[1][2]
+    np.testing.assert_array_equal(one[1][0], both[1][0])
+    with pytest.raises(ValueError, match="batching must be one of"):
+        fitting.fit_traces(traces, batching="pmap")
 
 
 def test_bad_arguments_raise_value_error():
