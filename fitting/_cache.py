@@ -1,11 +1,9 @@
-"""JAX's persistent compilation cache for the command line: a repeated ``lubjax-fit`` call loads
-the compiled solver from disk instead of compiling it again.
+"""The fit's compiled programs across calls: a repeated ``lubjax-fit`` call loads the compiled
+solver from disk instead of compiling it again.
 
-Never switched on by importing the library: only the CLI calls :func:`enable_compilation_cache`
-(or a user, explicitly). Where: ``$LUBJAX_CACHE_DIR``, else ``$XDG_CACHE_HOME/lubjax/jax``, else
-``~/.cache/lubjax/jax``. Off: ``LUBJAX_CACHE=0`` (or ``--no-cache``). The cache holds XLA
-executables keyed by the program, the jax version and the device; deleting the folder is always
-safe.
+JAX's persistent compilation cache is lubjax's (lubjax/_compile_cache.py: where it lives, how it
+is switched off; never on by importing the library): :func:`enable_compilation_cache` turns it
+on and, while it is on, the stored programs below.
 
 The XLA cache alone leaves most of a warm call's start-up in place: tracing and lowering the
 solver's jvp-of-a-while-loop under vmap costs ~1.5 s per program before XLA is even asked. So
@@ -26,40 +24,20 @@ import tempfile
 import jax
 import numpy as np
 
+from lubjax import _compile_cache
+from lubjax._compile_cache import cache_dir  # noqa: F401  (re-exported: tests, users)
+
 #: Where enable_compilation_cache pointed the cache (None: off, the library's default).
 _ENABLED: str | None = None
 _LOADED: dict = {}
 
 
-def cache_dir() -> str:
-    """The cache folder (see module docstring)."""
-    path = os.environ.get("LUBJAX_CACHE_DIR")
-    if path:
-        return path
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return os.path.join(base, "lubjax", "jax")
-
-
 def enable_compilation_cache(path: str | None = None) -> str | None:
-    """Point JAX's persistent compilation cache at ``path`` (default :func:`cache_dir`); every
-    compilation is cached (the solver's take seconds). Returns the folder, or None when
-    ``LUBJAX_CACHE=0`` or the folder cannot be made (then nothing changes: a cache is an
-    optimisation, never a reason to fail)."""
-    if os.environ.get("LUBJAX_CACHE", "1").strip().lower() in ("0", "off", "no", "false"):
-        return None
-    path = cache_dir() if path is None else path
-    try:
-        os.makedirs(path, exist_ok=True)
-    except OSError:
-        return None
-    if not os.access(path, os.W_OK):
-        return None
-    jax.config.update("jax_compilation_cache_dir", path)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    """:func:`lubjax.enable_compilation_cache` (JAX's persistent cache; see there), and the
+    stored lowered programs of :func:`exported` in the same folder while it is on."""
     global _ENABLED
-    _ENABLED = path
-    return path
+    _ENABLED = _compile_cache.enable_compilation_cache(path)
+    return _ENABLED
 
 
 @functools.lru_cache(maxsize=1)

@@ -18,6 +18,7 @@ from ._analytic import (  # noqa: E402
     rigid_squeeze_force,
     rigid_squeeze_pressure,
 )
+from ._compile_cache import enable_compilation_cache  # noqa: E402
 from ._drives import FreeSphere, Load, Spring, Travel, as_drive, restitution  # noqa: E402
 from ._indenter import RampHold, SampledTravel  # noqa: E402
 from ._influence import force_weights, influence_matrix, kernel  # noqa: E402
@@ -89,6 +90,7 @@ __all__ = [
     "check_parameters",
     "contact_modulus",
     "discretise",
+    "enable_compilation_cache",
     "displacement",
     "evaluate",
     "film_thickness",

@@ -41,6 +41,14 @@ SI_NAMES = ("E_star", "E", "poisson", "viscosity", "radius", "speed", "indent", 
 LAYER_BASES = ("bonded", "frictionless")
 
 
+def _add_cache_flag(parser) -> None:
+    parser.add_argument(
+        "--no-cache", action="store_true",
+        help="do not use the persistent compilation cache (also LUBJAX_CACHE=0; where it is: "
+        "$LUBJAX_CACHE_DIR, else ~/.cache/lubjax/jax)",
+    )
+
+
 def _parser() -> Parser:
     p = Parser(prog=PROG, description=DESCRIPTION, epilog=EPILOG)
     add_debug_flag(p)
@@ -85,6 +93,7 @@ def _parser() -> Parser:
     r.add_argument("--order", type=int, choices=(1, 2), default=None, help="1: backward Euler")
     r.add_argument("--out", help="write results as JSON here")
     r.add_argument("--plot", help="write a force / film figure here (.png, .pdf, .svg, ...)")
+    _add_cache_flag(r)
     add_debug_flag(r)
 
     c = sub.add_parser(
@@ -104,6 +113,7 @@ def _parser() -> Parser:
     c.add_argument("--gap", type=float, help="initial gap z0 [m]")
     _add_substrate(c)
     _add_accuracy(c)
+    _add_cache_flag(c)
     add_debug_flag(c)
 
     b = sub.add_parser(
@@ -126,6 +136,7 @@ def _parser() -> Parser:
                    help="end time [s] (default 20 x0/V)")
     _add_substrate(b)
     _add_accuracy(b)
+    _add_cache_flag(b)
     add_debug_flag(b)
     return p
 
@@ -508,6 +519,10 @@ def _write(args, out, res, kind, test):
 
 
 def _dispatch(args) -> int:
+    if not args.no_cache:  # a repeated call loads the compiled solver instead of compiling it
+        from ._compile_cache import enable_compilation_cache
+
+        enable_compilation_cache()
     return {"relax": _relax, "creep": _creep, "bounce": _bounce}[args.command](args)
 
 

@@ -1,4 +1,5 @@
-"""The persistent compilation cache: only where asked for, in the folder asked for."""
+"""The persistent compilation cache (lubjax/_compile_cache.py, fitting/_cache.py): only where
+asked for, in the folder asked for."""
 
 import os
 import subprocess
@@ -14,10 +15,18 @@ from fitting._cache import cache_dir, enable_compilation_cache
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+def _env():
+    """A child process's environment with the cache switch as a user has it (conftest.py turns
+    it off for the test process)."""
+    env = dict(os.environ, PYTHONPATH=ROOT)
+    env.pop("LUBJAX_CACHE", None)
+    return env
+
+
 def test_importing_the_library_does_not_enable_the_cache():
     code = "import lubjax, fitting, jax; print(jax.config.jax_compilation_cache_dir)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         env=dict(os.environ, PYTHONPATH=ROOT), check=True)
+                         env=_env(), check=True)
     assert out.stdout.strip() == "None"
 
 
@@ -49,7 +58,7 @@ def test_a_cli_fit_fills_the_cache_and_no_cache_does_not(tmp_path):
     src = tmp_path / "short.csv"
     fitting.write_trace(src, tr._replace(time=tr.time[keep], displacement=tr.displacement[keep],
                                          force=tr.force[keep]))
-    env = dict(os.environ, PYTHONPATH=ROOT)
+    env = _env()
     for flag, cache in [((), tmp_path / "on"), (("--no-cache",), tmp_path / "none")]:
         env["LUBJAX_CACHE_DIR"] = str(cache)
         proc = subprocess.run([sys.executable, "-m", "fitting", str(src), "--quiet", "--max-iter",
@@ -57,6 +66,27 @@ def test_a_cli_fit_fills_the_cache_and_no_cache_does_not(tmp_path):
         assert proc.returncode in (0, 1), proc.stderr
     assert len(os.listdir(tmp_path / "on")) > 0
     assert len(os.listdir(tmp_path / "on" / "exported")) > 0  # the lowered programs too
+    assert not (tmp_path / "none").exists()
+
+
+def test_a_lubjax_run_fills_the_cache_reuses_it_alike_and_no_cache_does_not(tmp_path):
+    """`lubjax relax` turns the cache on (as lubjax-fit does): a first run fills the folder, a
+    second loads from it and gives the identical result; --no-cache writes nothing."""
+    import json
+
+    env = _env()
+    args = ["relax", "--beta", "100", "--z0", "0.5", "--t-end", "0.5", "--rtol", "1e-2"]
+    forces = []
+    for k, (flag, cache) in enumerate([((), "on"), ((), "on"), (("--no-cache",), "none")]):
+        env["LUBJAX_CACHE_DIR"] = str(tmp_path / cache)
+        out = tmp_path / f"run{k}.json"
+        proc = subprocess.run([sys.executable, "-m", "lubjax", *args, "--out", str(out), *flag],
+                              env=env, capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr
+        forces.append(json.loads(out.read_text())["force"])
+        if k == 0:
+            assert len(os.listdir(tmp_path / "on")) > 0
+    assert forces[0] == forces[1] == forces[2]
     assert not (tmp_path / "none").exists()
 
 

@@ -1,0 +1,44 @@
+"""JAX's persistent compilation cache for the command lines: a repeated ``lubjax`` or
+``lubjax-fit`` call loads the compiled solver from disk instead of compiling it again.
+
+Never switched on by importing the library: only the CLIs call :func:`enable_compilation_cache`
+(or a user, explicitly). Where: ``$LUBJAX_CACHE_DIR``, else ``$XDG_CACHE_HOME/lubjax/jax``, else
+``~/.cache/lubjax/jax``. Off: ``LUBJAX_CACHE=0`` (or ``--no-cache``). The cache holds XLA
+executables keyed by the program, the jax version and the device; deleting the folder is always
+safe. (``fitting`` also keeps its lowered programs there: fitting/_cache.py.)
+"""
+
+from __future__ import annotations
+
+import os
+
+import jax
+
+
+def cache_dir() -> str:
+    """The cache folder (see module docstring)."""
+    path = os.environ.get("LUBJAX_CACHE_DIR")
+    if path:
+        return path
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "lubjax", "jax")
+
+
+def enable_compilation_cache(path: str | None = None) -> str | None:
+    """Point JAX's persistent compilation cache at ``path`` (default :func:`cache_dir`); every
+    compilation is cached (the solver's take seconds). Returns the folder, or None when
+    ``LUBJAX_CACHE=0`` or the folder cannot be made (then nothing changes: a cache is an
+    optimisation, never a reason to fail)."""
+    if os.environ.get("LUBJAX_CACHE", "1").strip().lower() in ("0", "off", "no", "false"):
+        return None
+    path = cache_dir() if path is None else path
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError:
+        return None
+    if not os.access(path, os.W_OK):
+        return None
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    return path
