@@ -94,6 +94,27 @@ def _neck_resolvable(beta, t_end, rim_dr) -> bool:
     return neck >= 0.25 * rim_dr
 
 
+#: The trapped film's spatial error inside a contact: |Δh̄(0)|/h̄(0) ≈ DIMPLE_ERROR Δr̄_c²/h̄_min
+#: for an interior spacing Δr̄_c, with h̄_min ≈ NECK_CONSTANT/√(β t̄_end) (measured against the
+#: converged references of benchmarks/accuracy.py at z̄0 = 0.5: 1.0e-3 at β = 100, t̄ = 5 and
+#: 3.8 %, 1.6 %, 0.31 % at β = 10³, t̄ = 10³ with Δr̄_c = 0.014, 0.0093, 0.0047; the rule
+#: gives 8.5e-4 and 4.4 %, 2.0 %, 0.49 %).
+DIMPLE_ERROR = 0.068
+#: ... and the interior is refined until that is at most DIMPLE_TARGET × rtol (0.3 % at the
+#: default rtol, the size of the other errors of the defaults).
+DIMPLE_TARGET = 30.0
+
+
+def _interior_refinement(settings, beta, t_end) -> float:
+    """How much finer than Δr̄ the contact interior needs to be for the trapped film a run ends
+    with: 1 (not at all) for a run that ends before the film under the contact is thin
+    (the default t̄ ≤ 5 run), up to ``Settings.contact_refinement`` for long holds."""
+    dr = settings.mesh_parameters()[0]
+    h_min = NECK_CONSTANT / math.sqrt(beta * t_end)
+    needed = dr * math.sqrt(DIMPLE_ERROR / (DIMPLE_TARGET * settings.rtol * h_min))
+    return min(settings.contact_refinement, max(1.0, needed))
+
+
 def _contact_refinement(settings, drive, z0, beta, t_end) -> float | None:
     """The radius ``Settings.contact_radius="auto"`` refines around for one run, or None."""
     if settings.contact_radius != "auto":
@@ -129,8 +150,10 @@ class Settings:
         error_estimate: also run the nested coarse mesh (every other node) at rtol and at
             8·rtol, and return ``Result.force_error`` (about +30 % run time).
         contact_radius: refine the mesh to dr/rim_refinement around this r̄ (the Hertz
-            contact's edge, where a long hold drains through a thin neck) and to
-            dr/contact_refinement inside it (the trapped film h̄(0)); 0 refines the axis (a
+            contact's edge, where a long hold drains through a thin neck) and inside it to
+            what the trapped film h̄(0) a run ends with needs, at most dr/contact_refinement
+            (:func:`relax`: none for the default t̄ ≤ 5 run, the full factor for holds to
+            t̄ ~ 10³ at β ≳ 10³; ``DIMPLE_ERROR``); 0 refines the axis (a
             sphere that just touches); see
             :func:`lubjax.graded_mesh`. "auto" (default): :func:`relax` takes the edge of the
             contact the drive ends in, √(travel - z̄0) for a prescribed travel, √δ̄ of Hertz
@@ -195,9 +218,11 @@ class Settings:
             self.length if self.length is not None else length,
         )
 
-    def mesh(self, contact_radius: float | None = None) -> Mesh:
+    def mesh(self, contact_radius: float | None = None,
+             contact_refinement: float | None = None) -> Mesh:
         """The mesh; refined around ``contact_radius`` if given, else around a numeric
-        ``Settings.contact_radius``."""
+        ``Settings.contact_radius``, inside it by ``contact_refinement`` (default
+        ``Settings.contact_refinement``; :func:`relax` passes what the run needs)."""
         dr, growth, length = self.mesh_parameters()
         rim = contact_radius
         if rim is None and not isinstance(self.contact_radius, str):
@@ -206,7 +231,8 @@ class Settings:
             return graded_mesh(dr, self.r_fine, length, growth)
         return graded_mesh(
             dr, self.r_fine, length, growth, rim=rim, rim_dr=dr / self.rim_refinement,
-            contact_dr=dr / self.contact_refinement if rim > 0 else None,
+            contact_dr=dr / (self.contact_refinement if contact_refinement is None
+                             else contact_refinement) if rim > 0 else None,
         )
 
     def tolerance(self) -> Tolerance:
@@ -524,7 +550,8 @@ def relax(
     t_start = float(history.t_start)
     t_end = _check_t_end(t_end, t_start)
     ptimes = _check_times(profile_times, "profile_times", t_start, t_end)
-    mesh = settings.mesh(_contact_refinement(settings, history, z0, beta, t_end))
+    mesh = settings.mesh(_contact_refinement(settings, history, z0, beta, t_end),
+                         _interior_refinement(settings, float(beta), t_end))
     substrate = as_substrate(substrate)
     disc = discretise(mesh, substrate)
     tol = settings.tolerance()

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import lubjax
-from lubjax._solve import _contact_refinement
+from lubjax._solve import _contact_refinement, _interior_refinement
 
 RAMP = lubjax.as_drive(lubjax.RampHold())
 
@@ -50,6 +50,21 @@ def test_auto_refinement_follows_the_contact_the_run_ends_in(beta, z0, t_end, ex
     else:
         assert rim == pytest.approx(expected)
     assert _contact_refinement(lubjax.Settings(contact_radius=None), RAMP, z0, beta, t_end) is None
+
+
+def test_the_contact_interior_is_refined_only_as_far_as_the_trapped_film_needs():
+    """Not for the default t̄ ≤ 5 run (its dimple is ~0.01 thick: the plain spacing leaves h̄(0)
+    0.1 % off, benchmarks/accuracy.py's reference), fully (×3) for a hold to t̄ = 10³ at β = 10³
+    (h̄_min ~ 3e-4), in between for β = 100; growing with β t̄ and with a tighter tolerance."""
+    default = lubjax.Settings()
+    assert _interior_refinement(default, 100.0, 5.0) == 1.0
+    assert _interior_refinement(default, 1000.0, 1e3) == default.contact_refinement
+    middle = _interior_refinement(default, 100.0, 1e3)
+    assert 1.0 < middle < default.contact_refinement
+    assert _interior_refinement(lubjax.Settings(rtol=3e-5), 100.0, 1e3) > middle
+    assert _interior_refinement(default, 100.0, 1e2) < middle
+    short = lubjax.relax(100.0, 0.5, 5.0, settings=lubjax.Settings(error_estimate=False))
+    assert short.r.size == default.mesh(np.sqrt(0.5), 1.0).size < default.mesh(np.sqrt(0.5)).size
 
 
 def test_relax_refines_its_mesh_by_default():
