@@ -286,7 +286,7 @@ def _layout(groups, spec: ModelSpec, names_of_traces, theta0, shared) -> tuple[_
 
 class _Evaluator:
     """(r, J, film) of every problem at given x, in one call over all traces (mapped or vmap-ed:
-    ``fitting._model.batching_mode``).
+    ``lubjax._sharding.batching_mode``).
 
     The trace axis is split over ``devices`` devices (lubjax/_sharding.py): the stacked data
     and θ are padded to a multiple of the device count (repeating the last trace) and laid out
@@ -300,7 +300,7 @@ class _Evaluator:
         self.data, self.solver, self.spec = data, solver, spec
         self.layout, self.groups = layout, groups
         self.mesh = _sharding.batch_mesh(devices)
-        self.mode = _model.batching_mode(batching)
+        self.mode = _sharding.batching_mode(batching)
         self.rj = self.batched(0, "residuals_and_jacobian")
         self.runs = 0
         self.n_traces = len(layout.M)
@@ -637,10 +637,10 @@ def fit_traces(
         devices: how many of ``jax.devices()`` the trace batch is split over (default: all).
         batching: how each device evaluates its traces: "map" (one after another, each with its
             own steps, finished fits skipped), "vmap" (all at once) or "auto" (default: "map" on
-            CPU, "vmap" on an accelerator; ``fitting._model.batching_mode``).
+            CPU, "vmap" on an accelerator; ``lubjax._sharding.batching_mode``).
     """
     _check_args(traces, method, max_iter, tol, starts)
-    _model.batching_mode(batching)
+    _sharding.batching_mode(batching)
     n_dev = _sharding.device_count(devices)
     spec = _spec_for(traces, spec, drive,
                      dict(layer=layer, viscoelastic=viscoelastic, fit_offset=fit_offset))

@@ -492,28 +492,6 @@ def residuals_and_jacobian(theta, data: TraceData, solver: Solver, spec: ModelSp
     return r, J, film
 
 
-#: How a batch of traces is evaluated: "map" (one after another on each device, lax.map) or
-#: "vmap" (all at once). "auto": "map" on CPU, "vmap" on an accelerator.
-BATCHING = ("auto", "map", "vmap")
-
-
-def batching_mode(batching: str = "auto") -> str:
-    """``"map"`` or ``"vmap"`` for ``batching`` (see :data:`BATCHING`).
-
-    Why not vmap on CPU: every member of a vmap-ed adaptive ``while_loop`` runs until the
-    batch's slowest member is done, and every ``lax.cond`` in the step (accept/reject,
-    restarts) becomes a select that computes both branches; on CPU the batched LU gains nothing
-    from the batch (it is a loop of LAPACK calls). A sequential ``lax.map`` lets each trace take
-    its own steps and skips the traces whose fit has ended (``active``). An accelerator is the
-    other way round: there the batch is what fills the device.
-    """
-    if batching not in BATCHING:
-        raise ValueError(f"batching must be one of {', '.join(BATCHING)}, got {batching!r}")
-    if batching == "auto":
-        return "map" if jax.default_backend() == "cpu" else "vmap"
-    return batching
-
-
 def _batched(fn, mode: str):
     """``fn(θ, data, solver)`` over a leading trace axis of θ, data and ``active`` (bool per
     trace). ``"map"``: one trace at a time, inactive traces skipped (their outputs zero);
@@ -541,9 +519,10 @@ def _batched(fn, mode: str):
 def batched_functions(spec: ModelSpec, mesh=None, mode: str = "vmap"):
     """jit-compiled, trace-batched (r, J, film) and (y, film) for ``spec``, functions of
     (θ, data, solver, active): θ, the data and ``active`` carry the trace axis, the solver is
-    shared (its tolerance an argument). ``mode``: "map" or "vmap" (:func:`batching_mode`).
-    With a ``mesh`` (lubjax/_sharding.py) the trace axis is split over its devices, the solver
-    replicated, and each device maps or vmaps over its own traces."""
+    shared (its tolerance an argument). ``mode``: "map" or "vmap"
+    (:func:`lubjax._sharding.batching_mode`). With a ``mesh`` (lubjax/_sharding.py) the trace
+    axis is split over its devices, the solver replicated, and each device maps or vmaps over
+    its own traces."""
     fns = (functools.partial(residuals_and_jacobian, spec=spec),
            functools.partial(predict, spec=spec))
     return tuple(jax.jit(_sharding.over_batch(_batched(f, mode), mesh, (True, True, False, True)))

@@ -1,11 +1,12 @@
 """Split a batch axis over JAX devices with ``jax.sharding`` (shared by ``sweep`` and the fits).
 
 A batch (the (β, z̄0) pairs of a sweep, the traces of a batched fit) is one ``jit`` of a
-``vmap``-ed function. To run it on several devices the leading axis of the per-member inputs is
+batched function: ``lax.map``-ed on CPU, ``vmap``-ed on accelerators (:func:`batching_mode`).
+To run it on several devices the leading axis of the per-member inputs is
 laid out over a one-axis :class:`jax.sharding.Mesh` (``"batch"``) with
 ``NamedSharding(mesh, P("batch"))`` and everything the members share (the discretisation, the
 drive, the output times) is replicated (``NamedSharding(mesh, P())``). The call is one
-``jit`` of a ``jax.shard_map`` of the ``vmap``-ed function (:func:`over_batch`): one SPMD program
+``jit`` of a ``jax.shard_map`` of the batched function (:func:`over_batch`): one SPMD program
 in which every device runs the one-device program on its slice. No hand-written per-device
 loop; on accelerators the slices run concurrently.
 
@@ -96,8 +97,31 @@ def batch_mesh(n_devices: int) -> Mesh | None:
     return Mesh(np.array(jax.devices()[:n_devices]), (AXIS,))
 
 
+#: How each device evaluates its part of a batch (sweeps, batched fits): "map" (one member
+#: after another, ``lax.map``) or "vmap" (all at once). "auto": "map" on CPU, "vmap" on an
+#: accelerator.
+BATCHING = ("auto", "map", "vmap")
+
+
+def batching_mode(batching: str = "auto") -> str:
+    """``"map"`` or ``"vmap"`` for ``batching`` (see :data:`BATCHING`).
+
+    Why not vmap on CPU: every member of a vmap-ed adaptive ``while_loop`` runs until the
+    batch's slowest member is done, and every ``lax.cond`` in the step (accept/reject,
+    restarts) becomes a select that computes both branches; on CPU the batched LU gains nothing
+    from the batch (it is a loop of LAPACK calls). A sequential ``lax.map`` lets each member take
+    its own steps (and a fit skip the traces whose fit has ended). An accelerator is the other
+    way round: there the batch is what fills the device.
+    """
+    if batching not in BATCHING:
+        raise ValueError(f"batching must be one of {', '.join(BATCHING)}, got {batching!r}")
+    if batching == "auto":
+        return "map" if jax.default_backend() == "cpu" else "vmap"
+    return batching
+
+
 def over_batch(fn, mesh: Mesh | None, batched: tuple[bool, ...]):
-    """``fn`` (a ``vmap``-ed function of positional arguments, batched where ``batched`` says)
+    """``fn`` (a batched function of positional arguments, batched where ``batched`` says)
     as one SPMD function over the mesh: each device applies ``fn`` to its slice of the batch
     and the replicated rest (``jax.shard_map``), every output split along its leading axis.
     Unchanged without a mesh. Wrap the result in ``jax.jit``.

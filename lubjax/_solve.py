@@ -596,8 +596,9 @@ def relax(
         reason = ""
     elif status == STEP_TOO_SMALL:
         reason = (
-            "the step size collapsed (the film could not be kept positive); loosen nothing, "
-            "but refine the mesh (Settings.dr) or check the parameters"
+            "the step size collapsed (every shorter step was rejected: the film would lose "
+            "positivity, or the local error estimate stayed above the tolerance); refine the "
+            "mesh (Settings.dr) or check the parameters"
         )
     else:
         reason = (

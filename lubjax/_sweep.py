@@ -1,9 +1,10 @@
-"""Batches of relaxation tests in one compiled, ``vmap``-ped call, sharded over JAX devices.
+"""Batches of relaxation tests in one compiled call, sharded over JAX devices (each device maps
+or ``vmap``-s over its pairs: :func:`lubjax._sharding.batching_mode`).
 
 The batch of (β, z̄0) pairs is padded to a multiple of the device count and laid out on a
 one-axis device mesh (``NamedSharding(mesh, P("batch"))``); the discretisation, drive, substrate,
 t̄_end and output times are replicated (``P()``). One ``jax.jit`` of a ``shard_map`` of the
-``vmap``-ped rollout then runs as one SPMD program: each device runs the one-device program on
+batched rollout then runs as one SPMD program: each device runs the one-device program on
 its slice, so a member's result is bit-identical to the one-device sweep (tests/test_sharding.py)
 and a device stops at its own slowest member. It is compiled ahead of time
 (``.lower(...).compile()``) so the compile time is reported apart, and cached per device count,
@@ -60,15 +61,25 @@ def _one(tol, disc, history, substrate, t_end, times, b, z):
 
 
 @functools.lru_cache(maxsize=8)
-def _batched(tol):
+def _batched(tol, mode: str):
+    """The rollout over the β, z̄0 axis: ``vmap``-ed, or one pair after another (``lax.map``,
+    ``mode="map"``: each run its own steps; :func:`lubjax._sharding.batching_mode`)."""
     one = functools.partial(_one, tol)
-    return jax.vmap(one, in_axes=(None, None, None, None, None, 0, 0))
+    if mode == "vmap":
+        return jax.vmap(one, in_axes=(None, None, None, None, None, 0, 0))
+
+    def mapped(disc, history, substrate, t_end, times, b, z):
+        return jax.lax.map(
+            lambda bz: one(disc, history, substrate, t_end, times, bz[0], bz[1]), (b, z)
+        )
+
+    return mapped
 
 
 _COMPILED: dict = {}
 
 
-def _compiled_for(tol, args, mesh):
+def _compiled_for(tol, args, mesh, mode):
     """AOT-compile once per (device count, mesh size, drive, output count, tolerance, batch
     size); returns (fn, seconds). With a mesh the shared inputs are replicated and β, z̄0 and
     every output split over it: one jit of a shard_map, one SPMD program for all devices
@@ -77,11 +88,11 @@ def _compiled_for(tol, args, mesh):
     leaves, treedef = jax.tree_util.tree_flatten((history, substrate))
     shapes = tuple(np.shape(x) for x in leaves)
     n_dev = 1 if mesh is None else mesh.size
-    key = (n_dev, disc.r.shape[0], treedef, shapes, times.shape[0], tol, b.shape[0])
+    key = (n_dev, disc.r.shape[0], treedef, shapes, times.shape[0], tol, b.shape[0], mode)
     if key in _COMPILED:
         return _COMPILED[key], 0.0
     batched = (False,) * 5 + (True, True)  # shared inputs, then β and z̄0
-    fn = jax.jit(_sharding.over_batch(_batched(tol), mesh, batched))
+    fn = jax.jit(_sharding.over_batch(_batched(tol, mode), mesh, batched))
     start = time.perf_counter()
     _COMPILED[key] = fn.lower(*args).compile()
     return _COMPILED[key], time.perf_counter() - start
@@ -98,17 +109,19 @@ def sweep(
     settings: Settings | None = None,
     devices: int | None = None,
     times=None,
+    batching: str = "auto",
 ) -> SweepResult:
     """Run relaxation tests for all (β, z̄0) pairs (arrays broadcast together) in one compiled call.
 
-    All runs share one mesh; each takes its own error-controlled steps (``vmap`` of a
-    ``while_loop``: the batch runs until its slowest member is done) and reports F̄ and min h̄
+    All runs share one mesh; each takes its own error-controlled steps and reports F̄ and min h̄
     at the shared output ``times`` (default 501 equally spaced) by its own interpolant; any
     ``drive`` (shared by the batch) instead of the travel ``history``, and any ``substrate``. The
     batch is padded to a multiple of the device count and sharded across ``devices`` (default:
     all of ``jax.devices()``; several CPU host devices need ``PJRT_NPROC`` > ``devices``,
-    lubjax/_sharding.py). Failed runs are flagged in ``ok`` rather than raised, so one bad
-    corner does not discard a map.
+    lubjax/_sharding.py). ``batching``: how each device runs its pairs, "map" (one after another,
+    the default on CPU), "vmap" (all at once, the default on an accelerator; the batch then runs
+    until its slowest member is done) or "auto". Failed runs are flagged in ``ok`` rather than
+    raised, so one bad corner does not discard a map.
 
     Example: a regime map over a grid, ``B, Z = np.meshgrid(betas, z0s); sweep(B, Z)``, then
     ``res.force.reshape(*B.shape, -1)``.
@@ -124,6 +137,7 @@ def sweep(
             raise ValueError(
                 f"{name} values must be finite and in [{lo:g}, {hi:g}], got {v[~good][:3]}"
             )
+    mode = _sharding.batching_mode(batching)
     n_dev = _sharding.device_count(devices)
     plan = make_plan(
         t_end, history=history, drive=drive, substrate=substrate, settings=settings, times=times
@@ -137,7 +151,7 @@ def sweep(
         *_sharding.shard_batch((bp, zp), mesh),
     )
     # Cached across calls; compile time reported apart (0 when cached).
-    compiled, compile_s = _compiled_for(plan.tol, args, mesh)
+    compiled, compile_s = _compiled_for(plan.tol, args, mesh, mode)
     start = time.perf_counter()
     with single_threaded_blas():
         outs = jax.block_until_ready(compiled(*args))

@@ -1,4 +1,5 @@
-"""vmap-ped sweeps agree with single runs; sharding over several (forced host) devices works."""
+"""Sweeps (mapped or vmap-ped) agree with single runs; sharding over several (forced host)
+devices works."""
 
 import os
 import subprocess
@@ -14,8 +15,10 @@ COARSE = lubjax.Settings(dr=0.05, mesh_growth=1.1, length=50.0, error_estimate=F
                          contact_radius=None)  # sweep uses the plain mesh: compare like with like
 
 
-def test_sweep_matches_single_runs():
-    res = lubjax.sweep([30.0, 300.0, 30.0], [0.6, 0.6, 1.5], t_end=2.0, settings=COARSE)
+@pytest.mark.parametrize("batching", ["map", "vmap"])
+def test_sweep_matches_single_runs(batching):
+    res = lubjax.sweep([30.0, 300.0, 30.0], [0.6, 0.6, 1.5], t_end=2.0, settings=COARSE,
+                       batching=batching)
     assert res.force.shape == (3, res.t.size) and res.ok.all()
     for k in range(3):
         single = lubjax.relax(res.beta[k], res.z0[k], t_end=2.0, settings=COARSE)
@@ -36,6 +39,8 @@ def test_sweep_rejects_bad_values():
         lubjax.sweep([1.0, -2.0], 0.5)
     with pytest.raises(ValueError, match="devices"):
         lubjax.sweep([1.0], 0.5, devices=99)
+    with pytest.raises(ValueError, match="batching must be one of"):
+        lubjax.sweep([1.0], 0.5, batching="pmap")
 
 
 def test_sweep_shards_across_two_host_devices():
