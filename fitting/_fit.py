@@ -342,7 +342,7 @@ class _Evaluator:
         """(r, J, ok) per problem at x; only ``problems`` (indices; default all) are computed
         where the batching can skip (the others' entries are then None)."""
         wanted = np.zeros(len(self.groups), bool)
-        wanted[list(range(len(self.groups))) if problems is None else list(problems)] = True
+        wanted[slice(None) if problems is None else list(problems)] = True
         active = np.zeros(self.n_traces, bool)
         for k in np.flatnonzero(wanted):
             active[self.groups[k]] = True

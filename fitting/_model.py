@@ -458,10 +458,15 @@ def predict(theta, data: TraceData, solver: Solver, spec: ModelSpec, mode: str =
     return _response(theta, channel, data, spec), film
 
 
+def _scaled(y, data: TraceData):
+    """r_k = w_k (y_k - y_k^data)/σ."""
+    return data.weight * (y - data.response) / data.noise
+
+
 def residuals(theta, data: TraceData, solver: Solver, spec: ModelSpec):
     """r_k = w_k (y_k(θ) - y_k^data)/σ, and min h̄ as aux."""
     y, film_min = predict(theta, data, solver, spec)
-    return data.weight * (y - data.response) / data.noise, film_min
+    return _scaled(y, data), film_min
 
 
 def residuals_and_jacobian(theta, data: TraceData, solver: Solver, spec: ModelSpec):
@@ -484,7 +489,7 @@ def residuals_and_jacobian(theta, data: TraceData, solver: Solver, spec: ModelSp
     dc_dtheta = dc_du @ du
 
     def res(th, ch):
-        return data.weight * (_response(th, ch, data, spec) - data.response) / data.noise
+        return _scaled(_response(th, ch, data, spec), data)
 
     r = res(theta, c)
     J = jax.vmap(lambda v, dc: jax.jvp(res, (theta, c), (v, dc))[1], in_axes=(0, 1),
@@ -492,27 +497,29 @@ def residuals_and_jacobian(theta, data: TraceData, solver: Solver, spec: ModelSp
     return r, J, film
 
 
+#: The batched functions' arguments (θ, data, solver, active): which carry the trace axis.
+_BATCHED = (True, True, False, True)
+
+
 def _batched(fn, mode: str):
     """``fn(θ, data, solver)`` over a leading trace axis of θ, data and ``active`` (bool per
     trace). ``"map"``: one trace at a time, inactive traces skipped (their outputs zero);
     ``"vmap"``: all at once, ``active`` ignored (a select could not skip the work)."""
     if mode == "vmap":
-        many = jax.vmap(fn, in_axes=(0, 0, None))
-        return lambda theta, data, solver, active: many(theta, data, solver)
+        def member(theta, data, solver, active):
+            return fn(theta, data, solver)
+    else:
+        fn = jax.jit(fn)  # traced once: eval_shape and the branch share the trace
 
-    def run(theta, data, solver, active):
-        def one(args):
-            th, d, on = args
-            shapes = jax.eval_shape(fn, th, d, solver)
+        def member(theta, data, solver, active):
+            shapes = jax.eval_shape(fn, theta, data, solver)
             return jax.lax.cond(
-                on,
-                lambda: fn(th, d, solver),
+                active,
+                lambda: fn(theta, data, solver),
                 lambda: jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes),
             )
 
-        return jax.lax.map(one, (theta, data, active))
-
-    return run
+    return _sharding.batch(member, _BATCHED, mode)
 
 
 @functools.lru_cache(maxsize=16)
@@ -525,8 +532,7 @@ def batched_functions(spec: ModelSpec, mesh=None, mode: str = "vmap"):
     its own traces."""
     fns = (functools.partial(residuals_and_jacobian, spec=spec),
            functools.partial(predict, spec=spec))
-    return tuple(jax.jit(_sharding.over_batch(_batched(f, mode), mesh, (True, True, False, True)))
-                 for f in fns)
+    return tuple(jax.jit(_sharding.over_batch(_batched(f, mode), mesh, _BATCHED)) for f in fns)
 
 
 def stack(datas: list[TraceData]) -> TraceData:

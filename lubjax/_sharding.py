@@ -120,6 +120,23 @@ def batching_mode(batching: str = "auto") -> str:
     return batching
 
 
+def batch(fn, batched: tuple[bool, ...], mode: str):
+    """``fn`` of one member over a leading batch axis of the positional arguments marked in
+    ``batched`` (the others shared): ``jax.vmap`` for ``mode="vmap"``, a ``lax.map`` (one member
+    after another, each with its own adaptive steps) for ``"map"``."""
+    if mode == "vmap":
+        return jax.vmap(fn, in_axes=tuple(0 if b else None for b in batched))
+
+    def mapped(*args):
+        def one(members):
+            rest = iter(members)
+            return fn(*(next(rest) if b else a for a, b in zip(args, batched, strict=True)))
+
+        return jax.lax.map(one, tuple(a for a, b in zip(args, batched, strict=True) if b))
+
+    return mapped
+
+
 def over_batch(fn, mesh: Mesh | None, batched: tuple[bool, ...]):
     """``fn`` (a batched function of positional arguments, batched where ``batched`` says)
     as one SPMD function over the mesh: each device applies ``fn`` to its slice of the batch

@@ -60,20 +60,15 @@ def _one(tol, disc, history, substrate, t_end, times, b, z):
     )
 
 
+#: _one's arguments after the tolerance: the shared inputs, then β and z̄0 (one per member).
+_BATCHED = (False,) * 5 + (True, True)
+
+
 @functools.lru_cache(maxsize=8)
 def _batched(tol, mode: str):
     """The rollout over the β, z̄0 axis: ``vmap``-ed, or one pair after another (``lax.map``,
     ``mode="map"``: each run its own steps; :func:`lubjax._sharding.batching_mode`)."""
-    one = functools.partial(_one, tol)
-    if mode == "vmap":
-        return jax.vmap(one, in_axes=(None, None, None, None, None, 0, 0))
-
-    def mapped(disc, history, substrate, t_end, times, b, z):
-        return jax.lax.map(
-            lambda bz: one(disc, history, substrate, t_end, times, bz[0], bz[1]), (b, z)
-        )
-
-    return mapped
+    return _sharding.batch(functools.partial(_one, tol), _BATCHED, mode)
 
 
 _COMPILED: dict = {}
@@ -91,8 +86,7 @@ def _compiled_for(tol, args, mesh, mode):
     key = (n_dev, disc.r.shape[0], treedef, shapes, times.shape[0], tol, b.shape[0], mode)
     if key in _COMPILED:
         return _COMPILED[key], 0.0
-    batched = (False,) * 5 + (True, True)  # shared inputs, then β and z̄0
-    fn = jax.jit(_sharding.over_batch(_batched(tol, mode), mesh, batched))
+    fn = jax.jit(_sharding.over_batch(_batched(tol, mode), mesh, _BATCHED))
     start = time.perf_counter()
     _COMPILED[key] = fn.lower(*args).compile()
     return _COMPILED[key], time.perf_counter() - start
