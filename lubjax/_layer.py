@@ -41,6 +41,15 @@ and C ≡ 1 is the half-space matrix (8/π²)∫φ_j s/(s+r̄_i) K ds of ``influ
 the log singularity stays in Ŵ_half (tanh-sinh quadrature, ``_influence``), and ΔŴ is a smooth
 remainder, its integrand cut off where |C - 1| ~ (4t² + ...) e^{-2t} < 1e-17.
 
+The layer represents the pressure by plain hat functions in both parts (``influence_matrix(mesh,
+weighted=False)``), not by the half-space's squeeze-film-weighted ones (``_influence``): ΔŴ's
+transforms are closed-form only for plain hats, and on a thin layer Ŵ_layer is the small
+difference of Ŵ_half and -ΔŴ, which must share one representation (with the weight in Ŵ_half
+alone four of the thin-layer tests of tests/test_layer.py failed: the mismatch left an
+O(Δr̄²) residue of Ŵ_half in the thin response). The force weights, the conductances and the
+mesh are the half-space's. Measured (β = 100, z̄0 = 0.8, t̄ ≤ 5, H̄ = 3, 10, 30): outer growth
+1.15 is within 7e-5 of 1.03, 1.3 within 3.2e-4 (the weight in Ŵ_half as well: 8e-5, 3.5e-4).
+
 Hat transforms in closed form: integrating by parts once, with Φ(s) = s J₁(ks)/k (Φ' = s J₀(ks)),
 
     φ̃_j = ⟨Φ⟩_{e_j} - ⟨Φ⟩_{e_{j-1}}   (element means; ⟨Φ⟩_{e_{-1}} = 0, and for the last node
@@ -253,8 +262,9 @@ def layer_correction(mesh: Mesh, thickness: float, poisson: float, interface: st
 def layer_influence_matrix(
     mesh: Mesh, thickness: float, poisson: float = 0.5, interface: str = "bonded"
 ) -> np.ndarray:
-    """Ŵ (N×N) of a layer of thickness H̄ on a rigid base: w̄_i = -Σ_j Ŵ_ij p̄_j for a
-    piecewise-linear p̄ on ``mesh`` (same convention as ``influence_matrix``).
+    """Ŵ (N×N) of a layer of thickness H̄ on a rigid base: w̄_i = -Σ_j Ŵ_ij p̄_j for the nodal
+    pressures p̄ on ``mesh``, piecewise linear between them (plain hat functions: module
+    docstring; ``influence_matrix(mesh, weighted=False)`` is its half-space limit).
 
     Cached per (mesh, H̄, ν, interface); returned read-only. Raises ValueError for a layer too
     thin for the mesh (the k̄ quadrature would exceed ``MAX_NODES``).
@@ -267,6 +277,7 @@ def layer_influence_matrix(
         raise ValueError(f"layer poisson must be in (-1, 0.5], got {poisson!r}")
     if interface not in ("bonded", "frictionless"):
         raise ValueError(f"interface must be 'bonded' or 'frictionless', got {interface!r}")
-    w = influence_matrix(mesh) + layer_correction(mesh, thickness, poisson, interface)
+    half = influence_matrix(mesh, weighted=False)
+    w = half + layer_correction(mesh, thickness, poisson, interface)
     w.setflags(write=False)
     return w

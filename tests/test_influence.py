@@ -7,16 +7,23 @@ import pytest
 import lubjax
 
 
+def _psi(u):
+    """The pressure representation's weight ψ = (1 + u²/2)⁻² (lubjax/_influence.py, (P))."""
+    return 1 / (1 + u * u / 2) ** 2
+
+
 def _reference_entry(r, i, j, dps=30):
-    """Ŵ_ij by mpmath's adaptive quadrature at 30 digits, from eq 8b with a hat function."""
+    """Ŵ_ij by mpmath's adaptive quadrature at 30 digits, from eq 8b with the basis function
+    ψ(u)/ψ(r_j) times a hat function."""
     mp.mp.dps = dps
     ri = mp.mpf(r[i])
+    rj = mp.mpf(r[j])
 
     def g(u):
         m1 = ((u - ri) / (u + ri)) ** 2
         if m1 == 0:
             return mp.mpf(0)
-        return u / (u + ri) * mp.ellipk(1 - m1)
+        return u / (u + ri) * mp.ellipk(1 - m1) * _psi(u) / _psi(rj)
 
     total = mp.mpf(0)
     if j > 0:
@@ -49,11 +56,16 @@ def test_matrix_is_cached_per_mesh():
     )
 
 
-def test_force_weights_integrate_linear_pressure_exactly():
-    mesh = lubjax.graded_mesh(dr=0.05, r_fine=1.0, length=5.0, growth=1.3)
+def test_force_weights_integrate_the_represented_pressure_exactly():
+    """p̄ = ψ (a + b r̄) is represented exactly, so c·p̄ must be its 2π ∫ p̄ r̄ dr̄ to rounding.
+    With u = r̄/√2: ∫ r ψ dr = -1/(1 + r²/2), ∫ r² ψ dr = √2 (arctan u - u/(1 + u²))."""
+    mesh = lubjax.graded_mesh(dr=0.05, r_fine=1.0, length=50.0, growth=1.5)
     r = mesh.r
-    p = 5.0 - r  # linear: F = 2π ∫ (5 - r) r dr on [0, 5]
-    exact = 2 * np.pi * (5 * 25 / 2 - 125 / 3)
+    p = _psi(r) * (3.0 - 0.05 * r)
+    u = r[-1] / np.sqrt(2)
+    first = 1 - 1 / (1 + r[-1] ** 2 / 2)
+    second = np.sqrt(2) * (np.arctan(u) - u / (1 + u * u))
+    exact = 2 * np.pi * (3.0 * first - 0.05 * second)
     assert lubjax.force_weights(mesh) @ p == pytest.approx(exact, rel=1e-13)
 
 

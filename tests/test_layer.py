@@ -135,9 +135,13 @@ def test_a_thick_layer_is_the_half_space(interface):
     of the largest entry at H̄ = 10⁴ and 1e-6 needs H̄ ~ 10⁷. Beyond the leading term the
     remainder is 7e-6 at H̄ = 10³ and falls as H̄⁻³."""
     mesh = lubjax.graded_mesh(dr=0.05, r_fine=1.0, length=20.0, growth=1.2)
-    half = lubjax.influence_matrix(mesh)
+    half = lubjax.influence_matrix(mesh, weighted=False)  # the layer's representation
     c0 = quad(lambda t: -_layer.transfer_minus_one(t, 0.5, interface), 0, 60, limit=200)[0]
-    moment = lubjax.force_weights(mesh) / (2 * np.pi)  # ∫ φ_j s ds
+    # ∫ φ_j s ds of the plain hats (ΔŴ's representation; Ŵ_half weights them, lubjax/_layer.py)
+    r = mesh.r
+    moment = np.zeros_like(r)
+    moment[:-1] += np.diff(r) * (2 * r[:-1] + r[1:]) / 6
+    moment[1:] += np.diff(r) * (r[:-1] + 2 * r[1:]) / 6
     scale = np.abs(half).max()
     rest = {}
     for thickness in (1e3, 1e4):

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import lubjax  # enables float64
+from lubjax import _stepper
 
 
 def default_t_out(t_end: float = 5.0, every: float = 0.05) -> np.ndarray:
@@ -119,16 +120,17 @@ def film(disc, z, p):
     return z + 0.5 * disc.r**2 + disc.influence @ p
 
 
-def face_mobility(disc, h, z):
-    """Harmonic-Simpson mean of h̄³ on each cell [r_i, r_{i+1}] (as lubjax); film h, gap z."""
+def face_conductance(disc, h, z):
+    """lubjax's face conductances g ≈ r̄h̄³/Δr̄ (``lubjax._stepper.face_conductance``) of the film
+    h at the nodes, gap z (the midpoint film as lubjax takes it)."""
     elastic = h - z - 0.5 * disc.r**2
     h_mid = z + 0.5 * disc.face_r**2 + 0.5 * (elastic[:-1] + elastic[1:])
-    return 6.0 / (1.0 / h[:-1] ** 3 + 4.0 / h_mid**3 + 1.0 / h[1:] ** 3)
+    return _stepper.face_conductance(disc, h, h_mid)
 
 
 def flux_divergence(disc, beta, h, z, p):
-    """(T p)_i = g_{i+1/2}(p_{i+1}-p_i) - g_{i-1/2}(p_i-p_{i-1}) with g = β r k/Δr (all N nodes)."""
-    g = beta * disc.face_r * face_mobility(disc, h, z) / disc.face_gap
+    """(T p)_i = g_{i+1/2}(p_{i+1}-p_i) - g_{i-1/2}(p_i-p_{i-1}), g = β conductance (all nodes)."""
+    g = beta * face_conductance(disc, h, z)
     q = g * (p[1:] - p[:-1])  # flux through each face (outward positive when p rises outward)
     return jnp.concatenate([q, jnp.zeros(1, q.dtype)]) - jnp.concatenate(
         [jnp.zeros(1, q.dtype), q])
@@ -136,7 +138,7 @@ def flux_divergence(disc, beta, h, z, p):
 
 def tridiag_parts(disc, beta, h, z):
     """Sub/diag/super of -T restricted to the unknowns p_0..p_{N-2} (p_{N-1} = 0)."""
-    g = beta * disc.face_r * face_mobility(disc, h, z) / disc.face_gap
+    g = beta * face_conductance(disc, h, z)
     n = disc.r.shape[0] - 1
     diag = g[:n] + jnp.concatenate([jnp.zeros(1, g.dtype), g[: n - 1]])
     lower = jnp.concatenate([jnp.zeros(1, g.dtype), -g[: n - 1]])
@@ -154,7 +156,7 @@ def timed_compile(fn, *args):
 
 
 __all__ = [
-    "at_outputs", "default_t_out", "face_mobility", "film", "flux_divergence", "fv_mesh",
+    "at_outputs", "default_t_out", "face_conductance", "film", "flux_divergence", "fv_mesh",
     "growing_grid", "jnp", "make_info", "timed_compile", "travel",
     "tridiag_parts", "uniform_grid",
 ]

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .common import face_mobility, fv_setup, make_info
+from .common import face_conductance, fv_setup, make_info
 
 _COMPILED: dict = {}
 
@@ -33,7 +33,7 @@ def _functions(disc, winv):
         p = jnp.concatenate([p_in, jnp.zeros(1, p_in.dtype)])
         h_last = z + 0.5 * disc.r[-1] ** 2 + w_last @ p_in
         h = jnp.concatenate([h_in, h_last[None]])
-        g = beta * disc.face_r * face_mobility(disc, h, z) / disc.face_gap
+        g = beta * face_conductance(disc, h, z)
         q = g * (p[1:] - p[:-1])
         div = q - jnp.concatenate([jnp.zeros(1, q.dtype), q[:-1]])
         return div / area
