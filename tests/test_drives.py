@@ -50,21 +50,29 @@ def _rigid_creep_gap(beta, load, t):
 
 def test_creep_of_a_rigid_film_follows_reynolds_and_converges():
     """A light load on a stiff substrate (F̄0 = 1e-5: the elastic deflection is ~F̄0/z̄^{3/2})
-    against the closed form; the gap's error falls with rtol at BDF2's global order."""
+    against the closed form; the gap's error falls with rtol at the stepper's observed global
+    order in rtol, 1/2 to 2/3 (lubjax._solve.TIME_ORDER: each segment starts with backward
+    Euler, here at t̄ = 0 and where the load stops rising).
+
+    Measured: 8.5e-4, 3.2e-4, 9.2e-5 at rtol 1e-3, 1e-4, 1e-5, nearly all time error (the same
+    meshes at rtol 1e-7: 1.5e-4, 5.1e-5, 1.6e-5), fitted slope 0.48. (Before the far field's
+    squeeze-film weight the mesh's own error, larger at rtol 1e-3, steepened the two-point
+    slope of rtol 1e-3 and 1e-4 that this test used: 0.42 now.)"""
     load = 1e-5
     beta = np.pi / (2 * load * 4.5)  # the gap falls by e over the run
     times = np.linspace(0, 5, 51)
     exact = _rigid_creep_gap(beta, load, times)
+    rtols = np.array([1e-3, 1e-4, 1e-5])
     errors = []
-    for rtol in (1e-3, 1e-4):
+    for rtol in rtols:
         # (the mesh from the tolerance: on a fixed coarse mesh its error floors near 4e-4)
         s = lubjax.Settings(rtol=rtol, error_estimate=False)
         run = lubjax.relax(beta, 1.0, 5.0, drive=lubjax.Load(load), settings=s)
         np.testing.assert_allclose(run.force, load * np.clip(run.t, 0, 1), rtol=1e-9, atol=1e-18)
         errors.append(np.max(np.abs(run.at(times, "gap") / exact - 1)))
     assert errors[1] < 1e-3
-    slope = np.log10(errors[0] / errors[1])
-    assert 0.45 < slope < 1.2, errors  # rtol^{2/3} expected
+    slope = np.polyfit(np.log10(rtols), np.log10(errors), 1)[0]
+    assert 0.45 < slope < 1.2, errors
 
 
 def test_long_creep_reaches_hertz():
