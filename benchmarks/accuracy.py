@@ -5,10 +5,11 @@
 Cases: β ∈ {1, 10, 100, 1000} × z̄0 ∈ {0.5, 0.9, 1, 1.11, 2}, ramp then hold to t̄ = 10³. Every
 run is read at the same output times (500 in [0.01, 5], 200 log-spaced in [5, 10³]) by the
 stepper's own interpolant. The reference is a tight run (rtol 1e-7, atol 1e-16, dr = 0.005, mesh
-growth 1.02, L̄ = 2000); two more tight runs, one with a coarser far field (growth 1.04, L̄ = 1000),
-one with a coarser fine zone and tolerance (rtol 3e-7, dr = 0.0075, growth 1.06, L̄ = 500), show
+growth 1.05, L̄ = 2000); two more tight runs, one with a coarser far field (growth 1.1, L̄ = 1000),
+one with a coarser fine zone and tolerance (rtol 3e-7, dr = 0.0075, growth 1.15, L̄ = 500), show
 how far the reference itself is converged ("ref. change" columns: the larger change). Reference
-runs are cached in benchmarks/out/cache/ (committed; delete to recompute: about an hour).
+runs are cached in benchmarks/out/cache/ (committed; delete to recompute: about an hour), named
+by their settings, mesh and ``lubjax._stepper.DISCRETISATION``.
 
 Columns (all maxima over the output times):
 * F/peak: |F̄ - F̄_ref| / max F̄_ref;
@@ -36,22 +37,24 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import lubjax  # noqa: E402
 from benchmarks.machine import label  # noqa: E402
 from lubjax._solve import _final_contact_radius  # noqa: E402
+from lubjax._stepper import DISCRETISATION  # noqa: E402
 
 BETAS = (1.0, 10.0, 100.0, 1000.0)
 Z0S = (0.5, 0.9, 1.0, 1.11, 2.0)
 T_END = 1e3
 T_OUT = np.unique(np.concatenate([np.linspace(0.01, 5.0, 500), np.geomspace(5.0, T_END, 200)]))
 # Three tight runs. REFERENCE: fine zone Δr̄ = 0.005, refined by 7 at the contact edge and 2
-# inside (0.0007 and 0.0025, finer than the defaults' 0.001 and 0.0047), growth 1.02 to
-# L̄ = 2000. FAR_CHECK: the same with the far field of growth 1.04 to L̄ = 1000, which moved F̄ by
-# up to 3e-4 of its peak (z̄0 = 2) against REFERENCE: the far field converges slowly for a film
-# that stays open. CHECK: Δr̄ = 0.0075 and rtol 3e-7 (with the far field of growth 1.06 to L̄ =
-# 500, so its change also holds a far-field part and overstates the fine zone's).
+# inside (0.0007 and 0.0025, finer than the defaults' 0.001 and 0.0047), growth 1.05 to
+# L̄ = 2000. FAR_CHECK: the same with the far field of growth 1.1 to L̄ = 1000. CHECK: Δr̄ =
+# 0.0075 and rtol 3e-7 (with the far field of growth 1.15 to L̄ = 500, so its change also holds
+# a far-field part and overstates the fine zone's). (With plain hat functions the far field
+# converged slowly, as 0.18 (growth - 1)² at z̄0 = 2, and the references used growth 1.02: the
+# weighted representation of lubjax/_influence.py converges to ~1e-6 of F̄ by growth 1.08.)
 _TIGHT = dict(atol=1e-16, max_steps=400_000, error_estimate=False, contact_radius="auto",
               rim_refinement=7.0, contact_refinement=2.0)
-REFERENCE = lubjax.Settings(rtol=1e-7, dr=0.005, mesh_growth=1.02, length=2000.0, **_TIGHT)
-FAR_CHECK = lubjax.Settings(rtol=1e-7, dr=0.005, mesh_growth=1.04, length=1000.0, **_TIGHT)
-REFERENCE_CHECK = lubjax.Settings(rtol=3e-7, dr=0.0075, mesh_growth=1.06, length=500.0, **_TIGHT)
+REFERENCE = lubjax.Settings(rtol=1e-7, dr=0.005, mesh_growth=1.05, length=2000.0, **_TIGHT)
+FAR_CHECK = lubjax.Settings(rtol=1e-7, dr=0.005, mesh_growth=1.1, length=1000.0, **_TIGHT)
+REFERENCE_CHECK = lubjax.Settings(rtol=3e-7, dr=0.0075, mesh_growth=1.15, length=500.0, **_TIGHT)
 CHECKS = {"ref": REFERENCE, "far": FAR_CHECK, "check": REFERENCE_CHECK}
 CACHE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out", "cache")
 FIELDS = ("force", "film_center", "film_min")
@@ -79,7 +82,8 @@ def cache_path(beta, z0, tag):
     settings = CHECKS[tag]
     drive = lubjax.as_drive(lubjax.RampHold())
     rim = _final_contact_radius(drive, z0, settings.mesh_parameters()[0])
-    key = repr((settings.rtol, settings.atol, settings.mesh(rim).nodes, T_END)).encode()
+    key = repr((settings.rtol, settings.atol, settings.mesh(rim).nodes, T_END,
+                DISCRETISATION)).encode()
     digest = hashlib.sha1(key).hexdigest()[:10]
     return os.path.join(CACHE, f"{tag}_b{beta:g}_z{z0:g}_{digest}.npz")
 
