@@ -124,6 +124,25 @@ def _interior_refinement(settings, beta, t_end) -> float:
     return min(settings.contact_refinement, max(1.0, needed))
 
 
+#: The late neck's spatial error: |Δh̄_min|/h̄_min ≈ NECK_ERROR (Δr̄_rim/w)^NECK_ORDER for a rim
+#: spacing Δr̄_rim and a neck of width w ≈ h̄_min^{2/3} (measured against the converged
+#: references of benchmarks/accuracy.py: 1.8 % and 0.3 % at β = 10³, t̄ = 10³ with 2.2 and 4.5
+#: cells across the neck; 0.38 % at β = 10³, t̄ = 5 with 4.6 cells). Held to DIMPLE_TARGET × rtol
+#: like the trapped film: ~5 cells across the neck at the default rtol.
+NECK_ERROR = 0.12
+NECK_ORDER = 2.35
+
+
+def _rim_refinement(settings, beta, t_end) -> float:
+    """How much finer than Δr̄ the contact's edge needs to be for the neck a run ends with:
+    ~1 for the default t̄ ≤ 5 run (its neck, h̄_min ≈ 0.011 at β = 100, is 4 cells wide),
+    up to ``Settings.rim_refinement`` for long holds at large β."""
+    dr = settings.mesh_parameters()[0]
+    neck = (NECK_CONSTANT / math.sqrt(beta * t_end)) ** (2.0 / 3.0)
+    cells = (NECK_ERROR / (DIMPLE_TARGET * settings.rtol)) ** (1.0 / NECK_ORDER)
+    return min(settings.rim_refinement, max(1.0, dr * cells / neck))
+
+
 def _contact_refinement(settings, drive, z0, beta, t_end) -> float | None:
     """The radius ``Settings.contact_radius="auto"`` refines around for one run, or None."""
     if settings.contact_radius != "auto":
@@ -157,12 +176,13 @@ class Settings:
             so far): pointwise down to 1e-8 of the peak by default. Raise it where a tail far
             below the peak does not matter (fits of noisy data: fitting.FIT_SETTINGS uses 1e-5).
         error_estimate: also run the nested coarse mesh (every other node) at rtol and at
-            8·rtol, and return ``Result.force_error`` (about +30 % run time).
-        contact_radius: refine the mesh to dr/rim_refinement around this r̄ (the Hertz
-            contact's edge, where a long hold drains through a thin neck) and inside it to
-            what the trapped film h̄(0) a run ends with needs, at most dr/contact_refinement
-            (:func:`relax`: none for the default t̄ ≤ 5 run, the full factor for holds to
-            t̄ ~ 10³ at β ≳ 10³; ``DIMPLE_ERROR``); 0 refines the axis (a
+            8·rtol, and return ``Result.force_error`` (about +40 % run time).
+        contact_radius: refine the mesh around this r̄ (the Hertz contact's edge, where a
+            long hold drains through a thin neck) to what the neck a run ends with needs, at
+            most dr/rim_refinement (``NECK_ERROR``), and inside it to what the trapped film
+            h̄(0) needs, at most dr/contact_refinement (``DIMPLE_ERROR``) (:func:`relax`:
+            hardly any refinement for the default t̄ ≤ 5 run, the full factors for holds to
+            t̄ ~ 10³ at β ≳ 10³); 0 refines the axis (a
             sphere that just touches); see
             :func:`lubjax.graded_mesh`. "auto" (default): :func:`relax` takes the edge of the
             contact the drive ends in, √(travel - z̄0) for a prescribed travel, √δ̄ of Hertz
@@ -228,9 +248,11 @@ class Settings:
         )
 
     def mesh(self, contact_radius: float | None = None,
-             contact_refinement: float | None = None) -> Mesh:
+             contact_refinement: float | None = None,
+             rim_refinement: float | None = None) -> Mesh:
         """The mesh; refined around ``contact_radius`` if given, else around a numeric
-        ``Settings.contact_radius``, inside it by ``contact_refinement`` (default
+        ``Settings.contact_radius``, at it by ``rim_refinement`` and inside it by
+        ``contact_refinement`` (defaults ``Settings.rim_refinement`` and
         ``Settings.contact_refinement``; :func:`relax` passes what the run needs)."""
         dr, growth, length = self.mesh_parameters()
         rim = contact_radius
@@ -239,7 +261,8 @@ class Settings:
         if rim is None:
             return graded_mesh(dr, self.r_fine, length, growth)
         return graded_mesh(
-            dr, self.r_fine, length, growth, rim=rim, rim_dr=dr / self.rim_refinement,
+            dr, self.r_fine, length, growth, rim=rim,
+            rim_dr=dr / (self.rim_refinement if rim_refinement is None else rim_refinement),
             contact_dr=dr / (self.contact_refinement if contact_refinement is None
                              else contact_refinement) if rim > 0 else None,
         )
@@ -560,7 +583,8 @@ def relax(
     t_end = _check_t_end(t_end, t_start)
     ptimes = _check_times(profile_times, "profile_times", t_start, t_end)
     mesh = settings.mesh(_contact_refinement(settings, history, z0, beta, t_end),
-                         _interior_refinement(settings, float(beta), t_end))
+                         _interior_refinement(settings, float(beta), t_end),
+                         _rim_refinement(settings, float(beta), t_end))
     substrate = as_substrate(substrate)
     disc = discretise(mesh, substrate)
     tol = settings.tolerance()
