@@ -141,10 +141,11 @@ def test_corners_of_the_parameter_box_to_a_million(beta, z0):
 @pytest.mark.slow
 def test_error_estimate_bounds_the_error():
     """Result.force_error of a default run (ramp, hold to t̄ = 10³) against the accuracy table's
-    converged reference (benchmarks/accuracy.py: rtol 1e-7, dr = 0.005, growth 1.02 to L̄ = 2000,
+    converged reference (benchmarks/accuracy.py: rtol 1e-7, dr = 0.005, growth 1.05 to L̄ = 2000,
     itself checked against a coarser far field and a coarser fine zone; cached in
     benchmarks/out/cache, recomputed in minutes if missing), for β, z̄0 = (10, 0.9), (100, 1),
-    (1000, 1.11): it bounds the error pointwise at >= 95 % of the output times where the error
+    (1000, 1.11), (10, 2) (an open film, where a smaller safety factor failed): it bounds the
+    error pointwise at >= 95 % of the output times where the error
     is above 1e-6 of the peak, and it is not an empty bound: its maximum is at most 20x the
     largest error in every case and at most 10x in the median case. (Per case 20x, not 10x:
     the error itself can be small by accident. At (1000, 1.11) the same code gave a max error of
@@ -153,7 +154,7 @@ def test_error_estimate_bounds_the_error():
     from benchmarks import accuracy
 
     ratios = []
-    for beta, z0 in [(10.0, 0.9), (100.0, 1.0), (1000.0, 1.11)]:
+    for beta, z0 in [(10.0, 0.9), (100.0, 1.0), (1000.0, 1.11), (10.0, 2.0)]:
         ref = accuracy.reference(beta, z0, accuracy.REFERENCE, "ref")
         out, res = accuracy.run(beta, z0, lubjax.Settings())
         ratio, bounded = accuracy.estimate_quality(out, res, ref)  # the table's own measure
