@@ -9,7 +9,7 @@ parameter, z = (estimate - truth)/reported error; honest errors give rms z ≈ 1
 draws scatters by ≈ 1/√(2N) around it: ±0.14 at N = 24, ±0.09 at N = 60). The white-noise
 errors alone (no AR(1) sandwich, no solver error) are shown beside them.
 
-The fit runs at its default ``fitting.FIT_SETTINGS`` (rtol 3e-4, 198 nodes) on the trace cut to
+The fit runs at its default ``fitting.FIT_SETTINGS`` (rtol 3e-4, 132 nodes) on the trace cut to
 t̄ ≤ ``--t-bar``. Writes benchmarks/out/fit_coverage.md.
 """
 

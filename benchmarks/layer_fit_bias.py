@@ -11,7 +11,7 @@ bias. Here:
    10.0, 9.4, 9.0), made by ``data/make_synthetic.py``'s generator (``clean_force(...,
    layer_m=5e-3)``: rtol 1e-7 (force floor raised, LAYER_FORCE_ATOL there), Δr̄ = 0.01,
    544 nodes, L̄ = 1000, the input sampled at 40,001 points; the fits use
-   ``fitting.FIT_SETTINGS``, rtol 3e-4, 198 nodes), cached as
+   ``fitting.FIT_SETTINGS``, rtol 3e-4, 132 nodes), cached as
    ``data/clean/layer5mm_dc*_clean.csv`` (generated when missing);
 2. Gaussian noise of 1 % of the peak force on the force channel (seeds 5126, 5140, 5154, + k
    for the k-th further draw), written as ``data/layer5mm_dc*.csv`` for the first draw;
@@ -131,7 +131,7 @@ def write_md(res):
         "Synthetic traces of the paper's tests on a bonded incompressible 5 mm layer on a rigid "
         "base (R = 2 mm, v0 = 0.1 mm/s, z0 = 140 μm, η = 100 Pa s, E* = 3.92 MPa), made on the "
         "fine generator grid (rtol 1e-7, 544 nodes, L̄ = 1000), 1 % Gaussian noise; fitted at "
-        "`fitting.FIT_SETTINGS` (rtol 3e-4, 198 nodes) with the half-space (default) and with "
+        "`fitting.FIT_SETTINGS` (rtol 3e-4, 132 nodes) with the half-space (default) and with "
         "`--substrate layer --thickness 5e-3`. Values ± reported 1σ (relative bias, z-score).", "",
         "| trace | seed | H̄ | model | E* [MPa] | η [Pa s] | z0 [μm] | χ²/ν "
         "| ΔBIC (layer better if > 10) | choice |",

@@ -68,10 +68,11 @@ from ._io import Trace
 DRIVES = ("travel", "spring", "force")
 LAYER_BASES = ("bonded", "frictionless")
 
-#: Accuracy of the model inside fits: the solver's own error control at rtol = 3e-4 (198
-#: nodes; the solver's default 1e-4 has 271). At 1e-3 the model of paper_dc140 at the true
+#: Accuracy of the model inside fits: the solver's own error control at rtol = 3e-4 (132
+#: nodes; the solver's default 1e-4 has 177). At 1e-3 the model of paper_dc140 at the true
 #: parameters was 4e-3 of the peak off where the lagged stage stops (a kink in the travel the
-#: steps must resolve), rms 2.7e-4; at 3e-4 1.9e-3 and 1.2e-4 (tests/test_fitting.py). The
+#: steps must resolve), rms 2.7e-4; at 3e-4 2.0e-3 and 1.5e-4 (tests/test_fitting.py; 1.9e-3
+#: and 1.2e-4 with the plain-hat far field and 198 nodes). The
 #: model's remaining error at the optimum is estimated and folded into the reported errors
 #: (fitting._stats). The force is held to rtol relative to itself only down to 1e-5 of its peak
 #: (a load cell's noise is ≥ 1e-3 of it), else the decaying hold of z̄0 > 1 traces chases the

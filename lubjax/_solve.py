@@ -176,7 +176,7 @@ class Settings:
             so far): pointwise down to 1e-8 of the peak by default. Raise it where a tail far
             below the peak does not matter (fits of noisy data: fitting.FIT_SETTINGS uses 1e-5).
         error_estimate: also run the nested coarse mesh (every other node) at rtol and at
-            8·rtol, and return ``Result.force_error`` (about +40 % run time).
+            8·rtol, and return ``Result.force_error`` (about +55 % run time at the default).
         contact_radius: refine the mesh around this r̄ (the Hertz contact's edge, where a
             long hold drains through a thin neck) to what the neck a run ends with needs, at
             most dr/rim_refinement (``NECK_ERROR``), and inside it to what the trapped film

@@ -251,7 +251,8 @@ def face_conductance(disc: Discretisation, h, h_mid):
     conductance by ~(3Δh̄/h̄)²/8, 2 % per cell on the geometric outer mesh where h̄ ~ r̄². The
     radius inside the mean (r̄_f ∫ dr̄/h̄³ was used before): on the outer mesh, whose cells are a
     fixed fraction of r̄, leaving it out was an O((growth - 1)²) error of the squeeze film's
-    pressure, 0.3 % at growth 1.1 (tests/test_analytic_limits.py). Where the flux is constant
+    force, 1.0e-3 at growth 1.1 (rigid squeeze, β = 10⁶, with the weighted pressure of
+    lubjax/_influence.py; 6e-5 with the radius inside). Where the flux is constant
     across a cell instead (the neck of a draining contact) the two differ by O((Δr̄/r̄)²), tiny
     on the fine zone. Including the nodes makes a face close as either node's film closes, as
     the continuous equation does (∂h̄/∂t̄ → 0 where h̄ → 0).

@@ -2,7 +2,7 @@
 
 The synthetic traces in data/ come from a much finer solver run than the fit's model
 (data/make_synthetic.py: rtol 1e-7, Δr̄ = 0.01, 544 nodes, the input sampled at 40,001 points;
-the fit sees the 100 Hz record at rtol 3e-4, 271 nodes), so recovery tests include the model's
+the fit sees the 100 Hz record at rtol 3e-4, 132 nodes), so recovery tests include the model's
 discretisation error.
 """
 
@@ -116,7 +116,7 @@ def test_residual_jacobian_is_forward_mode_and_consistent(spec, stem, z0):
 
 def test_model_matches_an_independent_fine_solver():
     """The fit's model at the true parameters against the clean trace of the fine generator:
-    rms within 3e-4 of the peak, every sample within 3e-3 (measured 1.2e-4 and 1.9e-3, the
+    rms within 3e-4 of the peak, every sample within 3e-3 (measured 1.5e-4 and 2.0e-3, the
     largest where the lagged stage stops: the 100 Hz record of the travel, monotone-cubic
     interpolated, is all the model knows of the motion between samples)."""
     tr = _trace("paper_dc140", clean=True)

@@ -2,7 +2,7 @@
 
 Both traces are the fine generator's (data/make_synthetic.py: rtol 1e-7, Δr̄ = 0.01, 544 nodes,
 L̄ = 1000, the input sampled at 40,001 points; the fits run at ``fitting.FIT_SETTINGS``, rtol
-3e-4, 198 nodes), noiseless in data/clean/, with 1 % Gaussian noise of the peak force added
+3e-4, 132 nodes), noiseless in data/clean/, with 1 % Gaussian noise of the peak force added
 here (seeded), and cut to t̄ ≤ 2.5 (the ramp, the peak and the relaxation; the late hold adds
 samples but little information); the solver's error is left out of the error budget
 (``model_error=False``: one run less per fit, and the decision uses only the likelihoods):
