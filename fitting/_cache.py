@@ -24,7 +24,7 @@ import tempfile
 import jax
 import numpy as np
 
-from lubjax import _compile_cache
+from lubjax import _compile_cache, _compiler
 from lubjax._compile_cache import cache_dir  # noqa: F401  (re-exported: tests, users)
 
 #: Where enable_compilation_cache pointed the cache (None: off, the library's default).
@@ -88,8 +88,12 @@ def _program(name, fn, leaves, treedef):
         except Exception:  # noqa: BLE001 - a truncated or foreign file: export afresh
             program = None
     if program is None:
+        # The function under fn's jit: a jit with compiler options (lubjax/_compiler.py) may
+        # not be nested in another; the options apply where the program is loaded, below.
+        inner = getattr(fn, "__wrapped__", fn)
+
         def flat(*xs):
-            return fn(*jax.tree_util.tree_unflatten(treedef, xs))
+            return inner(*jax.tree_util.tree_unflatten(treedef, xs))
 
         program = jax.export.export(jax.jit(flat))(*specs)
         os.makedirs(folder, exist_ok=True)
@@ -97,5 +101,5 @@ def _program(name, fn, leaves, treedef):
         with os.fdopen(fd, "wb") as fh:  # written whole, then renamed: readers never see half
             fh.write(program.serialize())
         os.replace(tmp, path)
-    _LOADED[key] = jax.jit(program.call)
+    _LOADED[key] = _compiler.jit(program.call)
     return _LOADED[key]

@@ -44,7 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import lubjax
-from lubjax import _sharding
+from lubjax import _compiler, _sharding
 from lubjax._threads import single_threaded_blas
 
 from . import _cache, _model, _stats
@@ -530,7 +530,7 @@ def _lbfgs(evaluate, x0s, n_samples, *, max_iter, tol, progress=None):
         opt = optax.lbfgs()
         vg = optax.value_and_grad_from_state(loss)
 
-        @jax.jit
+        @_compiler.jit
         def one(x, state, vg=vg, opt=opt, loss=loss):
             value, grad = vg(x, state=state)
             updates, state = opt.update(grad, state, x, value=value, grad=grad, value_fn=loss)

@@ -60,7 +60,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import lubjax
-from lubjax import _sharding
+from lubjax import _compiler, _sharding
 from lubjax._indenter import motion_start
 
 from ._io import Trace
@@ -533,7 +533,9 @@ def batched_functions(spec: ModelSpec, mesh=None, mode: str = "vmap"):
     its own traces."""
     fns = (functools.partial(residuals_and_jacobian, spec=spec),
            functools.partial(predict, spec=spec))
-    return tuple(jax.jit(_sharding.over_batch(_batched(f, mode), mesh, _BATCHED)) for f in fns)
+    return tuple(
+        _compiler.jit(_sharding.over_batch(_batched(f, mode), mesh, _BATCHED)) for f in fns
+    )
 
 
 def stack(datas: list[TraceData]) -> TraceData:

@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _compiler
 from ._drives import Load, Travel, as_drive
 from ._indenter import RampHold, SampledTravel
 from ._mesh import Mesh, graded_mesh
@@ -24,6 +25,7 @@ from ._stepper import (
     Tolerance,
     discretise,
     evaluate,
+    evaluate_host,
     rollout,
 )
 from ._substrate import HalfSpace, as_substrate
@@ -491,7 +493,7 @@ class Result:
         if field not in _SERIES[1:]:
             raise ValueError(f"field must be one of {', '.join(_SERIES[1:])}; got {field!r}")
         times = _check_times(times, "times", float(self.t[0]), self.t_end)
-        return np.asarray(evaluate(self.steps, times, field))
+        return evaluate_host(self.steps, times, field)
 
     def problems(self) -> list[str]:
         out = []
@@ -521,30 +523,39 @@ class Result:
 
 
 _COMPILED: dict = {}
+_ESTIMATED = ("force", "gap", "film_center", "film_min")
 _SERIES = ("t", "force", "film_min", "film_center", "outflow", "gap", "velocity",
            "elastic_energy", "dissipation")
 
 
-def _compiled_rollout(disc, history, substrate, tol: Tolerance, n_profiles: int):
+def _compiled_rollouts(runs, history, substrate) -> tuple[list, float]:
     """AOT-compile once per (mesh size, drive and substrate structure, tolerance structure,
     profile count): lets us report compile time apart. The tolerance's numbers are arguments,
-    so the error estimate's run at 8·rtol reuses the program of the run at rtol."""
-    leaves, treedef = jax.tree_util.tree_flatten((history, substrate, tol))
-    key = (disc.r.shape[0], treedef, tuple(np.shape(x) for x in leaves), n_profiles)
-    if key in _COMPILED:
-        return _COMPILED[key], 0.0
+    so the error estimate's run at 8·rtol reuses the program of the run at rtol. ``runs``:
+    (discretisation, tolerance, profile times) each; the programs not yet compiled are traced
+    one after another and compiled side by side (lubjax/_compiler.py). Returns the executables
+    and the seconds spent (tracing, lowering and compiling)."""
 
     def run(d, b, z, h, s, te, pt, t):
         return rollout(d, b, z, h, te, t, pt, substrate=s, mode="forward")
 
+    def key_of(disc, tol, ptimes):
+        leaves, treedef = jax.tree_util.tree_flatten((history, substrate, tol))
+        return disc.r.shape[0], treedef, tuple(np.shape(x) for x in leaves), ptimes.size
+
     start = time.perf_counter()
-    compiled = (
-        jax.jit(run)
-        .lower(disc, 1.0, 1.0, history, substrate, 1.0, np.zeros(n_profiles), tol)
-        .compile()
-    )
-    _COMPILED[key] = compiled
-    return compiled, time.perf_counter() - start
+    keys = [key_of(*r) for r in runs]
+    new = {k: r for k, r in zip(keys, runs) if k not in _COMPILED}
+    if new:
+        def lowerer(d, tol, pt):
+            return lambda: jax.jit(run).lower(
+                d, 1.0, 1.0, history, substrate, 1.0, np.zeros(pt.size), tol
+            )
+
+        compiled = _compiler.compile_all(lowerer(*r) for r in new.values())
+        _COMPILED.update(zip(new, compiled))
+    seconds = time.perf_counter() - start if new else 0.0
+    return [_COMPILED[k] for k in keys], seconds
 
 
 def relax(
@@ -597,11 +608,7 @@ def relax(
         coarse = discretise(mesh.coarsened(), substrate)
         loose = dataclasses.replace(tol, rtol=min(8 * tol.rtol, 0.1))
         runs += [(coarse, tol, ptimes[:0]), (coarse, loose, ptimes[:0])]
-    compiled, compile_s = [], 0.0
-    for d, t, pt in runs:
-        fn, seconds = _compiled_rollout(d, history, substrate, t, pt.size)
-        compiled.append(fn)
-        compile_s += seconds
+    compiled, compile_s = _compiled_rollouts(runs, history, substrate)
     start = time.perf_counter()
     with single_threaded_blas():
         trajs = [
@@ -619,14 +626,21 @@ def relax(
     h = np.asarray(traj.profile_films)
     # w̄ = -Ŵū from h̄ = z̄ + r̄²/2 - w̄ (ū ≠ p̄ on a viscoelastic substrate)
     w = z[:, None] + 0.5 * np.asarray(disc.r) ** 2 - h
-    def estimate(field):
-        if not settings.error_estimate:
-            return np.full_like(series[field], np.nan)
-        coarse, loose = (np.asarray(evaluate(tr.steps, series["t"], field)) for tr in trajs[1:])
-        return error_estimate(series[field], coarse, loose)
-
-    force_error, gap_error = estimate("force"), estimate("gap")
-    film_center_error, film_min_error = estimate("film_center"), estimate("film_min")
+    if settings.error_estimate:
+        # On the host (evaluate_host): evaluating with jax compiled ~40 small programs.
+        coarse, loose = (Step(*(np.asarray(a) for a in tr.steps)) for tr in trajs[1:])
+        errors = {
+            f: error_estimate(
+                series[f],
+                evaluate_host(coarse, series["t"], f),
+                evaluate_host(loose, series["t"], f),
+            )
+            for f in _ESTIMATED
+        }
+    else:
+        errors = {f: np.full_like(series[f], np.nan) for f in _ESTIMATED}
+    force_error, gap_error = errors["force"], errors["gap"]
+    film_center_error, film_min_error = errors["film_center"], errors["film_min"]
     status = int(traj.status)
     finished = status == DONE
     if finished:

@@ -339,18 +339,19 @@ def _next_breakpoint(breakpoints, t, t_end):
     return jnp.minimum(jnp.min(later, initial=jnp.inf), t_end)
 
 
-def _interpolate(t_query, t0, t1, t2, y0, y1, y2, linear):
+def _interpolate(t_query, t0, t1, t2, y0, y1, y2, linear, xp=jnp):
     """The step's interpolant through (t0, y0), (t1, y1), (t2, y2) at t_query ∈ [t1, t2]:
-    quadratic (BDF2's own dense output), or linear through the last two for a BE step."""
+    quadratic (BDF2's own dense output), or linear through the last two for a BE step.
+    ``xp``: jax.numpy, or numpy for results already on the host (:func:`evaluate_host`)."""
     lin = y1 + (t_query - t1) / (t2 - t1) * (y2 - y1)
     # Where linear, t0 may coincide with t1: move it so no branch divides by zero (a NaN in the
     # unselected branch would still poison reverse-mode gradients).
-    t0 = jnp.where(linear, 2.0 * t1 - t2, t0)
+    t0 = xp.where(linear, 2.0 * t1 - t2, t0)
     l0 = (t_query - t1) * (t_query - t2) / ((t0 - t1) * (t0 - t2))
     l1 = (t_query - t0) * (t_query - t2) / ((t1 - t0) * (t1 - t2))
     l2 = (t_query - t0) * (t_query - t1) / ((t2 - t0) * (t2 - t1))
     quad = l0 * y0 + l1 * y1 + l2 * y2
-    return jnp.where(linear, lin, quad)
+    return xp.where(linear, lin, quad)
 
 
 def _restart_step(tol: Tolerance, beta):
@@ -732,14 +733,27 @@ def evaluate(steps: Step, times, field: str = "force"):
     steps, linear for backward-Euler ones). Times past the end of the run give NaN; before the
     start, the initial value. Differentiable, vmappable; independent of which times are asked.
     """
+    return _evaluate(jnp, steps, times, field)
+
+
+def evaluate_host(steps: Step, times, field: str = "force") -> np.ndarray:
+    """:func:`evaluate` in NumPy, for a finished run on the host: the same arithmetic without
+    compiling anything (compiling even this small program costs ~0.2 s, a fresh ``relax``
+    call's error estimate and every new length of ``Result.at``'s times paid it)."""
+    steps = Step(*(np.asarray(a) for a in steps))
+    return _evaluate(np, steps, np.asarray(times, np.float64), field)
+
+
+def _evaluate(xp, steps: Step, times, field):
     values = getattr(steps, field)
-    times = jnp.asarray(times, values.dtype)
-    k = jnp.clip(jnp.searchsorted(steps.t, times, side="left"), 0, steps.t.shape[0] - 1)
+    times = xp.asarray(times, values.dtype)
+    k = xp.clip(xp.searchsorted(steps.t, times, side="left"), 0, steps.t.shape[0] - 1)
     i0, i1 = steps.stencil[k, 0], steps.stencil[k, 1]
     t0, t1, t2 = steps.t[i0], steps.t[i1], steps.t[k]
     y0, y1, y2 = values[i0], values[i1], values[k]
     linear = steps.linear[k] | (i0 == i1)
-    at = _interpolate(times, t0, t1, t2, y0, y1, y2, linear)
-    at = jnp.where(k == 0, values[0], at)
+    with np.errstate(invalid="ignore", divide="ignore"):  # NumPy: the unselected branch
+        at = _interpolate(times, t0, t1, t2, y0, y1, y2, linear, xp)
+    at = xp.where(k == 0, values[0], at)
     # An unfinished scan run repeats its last level: nothing is known past it.
-    return jnp.where(times > steps.t[-1], jnp.nan, at)
+    return xp.where(times > steps.t[-1], xp.nan, at)

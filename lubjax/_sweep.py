@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import _sharding
+from . import _compiler, _sharding
 from ._indenter import RampHold, SampledTravel
 from ._solve import BETA_RANGE, Z0_RANGE, Settings, _check_x64, make_plan
 from ._stepper import DONE, evaluate, rollout
@@ -88,7 +88,7 @@ def _compiled_for(tol, args, mesh, mode):
         return _COMPILED[key], 0.0
     fn = jax.jit(_sharding.over_batch(_batched(tol, mode), mesh, _BATCHED))
     start = time.perf_counter()
-    _COMPILED[key] = fn.lower(*args).compile()
+    _COMPILED[key] = _compiler.compile_one(fn.lower(*args))
     return _COMPILED[key], time.perf_counter() - start
 
 

@@ -1,0 +1,70 @@
+"""How lubjax's programs are compiled: XLA options that halve the CPU compile time, and the
+several programs of one call compiled side by side.
+
+A solver program is one ``while_loop`` whose body (an attempted step) XLA splits into ~90 small
+loop fusions; on CPU each becomes a kernel of its own, and generating them is most of the
+compile time. XLA's newer MLIR fusion emitters take ~2× longer for these kernels than its
+classic elemental emitters, with no faster code here: ``relax(100, 0.5, 5)``'s program compiled
+in 0.71–0.75 s instead of 1.29–1.45 s, ran as fast (0.167–0.174 s against 0.176–0.183 s on a
+noisy 2-core AMD EPYC VM) and gave the same force to 2e-8 of its peak (rounding:
+``benchmarks/default_run.py`` measures both). So lubjax asks for the classic ones, per program
+(``compiler_options``, never the process-wide ``XLA_FLAGS``), on the CPU only, and only where
+this jaxlib still knows the option (:func:`compiler_options` probes it once).
+``LUBJAX_XLA_OPTIONS=0`` switches it off.
+
+:func:`compile_all` compiles several programs (``relax``'s run and its error estimate's coarse-mesh
+run) in threads: XLA releases the GIL while it compiles, so the second program is traced while
+the first compiles, and on two cores both compile at once.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import jax
+
+#: XLA debug options for lubjax's programs on the CPU (see the module docstring).
+CPU_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+
+
+@functools.cache
+def compiler_options() -> dict:
+    """:data:`CPU_OPTIONS` on a CPU backend whose XLA knows them; else ``{}``. Off:
+    ``LUBJAX_XLA_OPTIONS=0``."""
+    if os.environ.get("LUBJAX_XLA_OPTIONS", "1").strip().lower() in ("0", "off", "no", "false"):
+        return {}
+    if jax.default_backend() != "cpu":
+        return {}
+    try:
+        # An option this XLA does not know raises at compile time ("No such compile option"):
+        # a newer jaxlib may drop it, and a missing speed-up is no reason to fail.
+        jax.jit(lambda x: x + 1.0).lower(1.0).compile(compiler_options=dict(CPU_OPTIONS))
+    except Exception:  # noqa: BLE001 - any refusal means: compile with XLA's defaults
+        return {}
+    return dict(CPU_OPTIONS)
+
+
+def jit(fn, **kwargs):
+    """``jax.jit`` with :func:`compiler_options`."""
+    return jax.jit(fn, compiler_options=compiler_options() or None, **kwargs)
+
+
+def compile_one(lowered):
+    """``lowered.compile()`` with :func:`compiler_options`."""
+    return lowered.compile(compiler_options=compiler_options() or None)
+
+
+def compile_all(lowerers) -> list:
+    """Compile several programs side by side: ``lowerers`` are zero-argument callables that
+    trace and lower one program each (``jax.jit(f).lower(...)``). Tracing holds the GIL, so it
+    runs here, one program after another, while XLA compiles the ones already lowered in
+    worker threads (it releases the GIL): on two cores the coarse-mesh program of ``relax``'s
+    error estimate is traced while its main program compiles."""
+    lowerers = list(lowerers)
+    if len(lowerers) <= 1:
+        return [compile_one(lower()) for lower in lowerers]
+    with ThreadPoolExecutor(max_workers=min(len(lowerers), os.cpu_count() or 1)) as pool:
+        futures = [pool.submit(compile_one, lower()) for lower in lowerers]
+        return [f.result() for f in futures]
