@@ -1,0 +1,95 @@
+"""A fresh process's first ``relax(100, 0.5, 5)`` at each git revision given, with that
+revision's defaults: what a user waits for, measured side by side in one run.
+
+    python benchmarks/first_call.py f1635a7 6c71a6e HEAD [--repeat 5]
+
+Issue "Error control", item 8 asks for no slower than "today's 0.16 s run / 0.9 s compile": the
+hand-tuned grid of commit f1635a7 (before the error-controlled stepper), measured on another
+machine. Machines differ (the same code's compile took 0.9 s there and 1.5–1.9 s on a later VM),
+so this runs that revision and others on *this* machine, alternating: each revision is checked
+out into a temporary git worktree and imported from there in fresh processes (``--repeat`` each,
+round-robin). Columns: import time, ``Result.compile_s`` of the first call, the first call's
+wall time, and the median ``run_s`` of five further calls. Writes
+benchmarks/out/first_call.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+OUT = os.path.join(ROOT, "benchmarks", "out")
+
+CHILD = r"""
+import json, time
+start = time.perf_counter()
+import lubjax
+imported = time.perf_counter()
+first = lubjax.relax(100, 0.5, 5.0)
+done = time.perf_counter()
+runs = sorted(lubjax.relax(100, 0.5, 5.0).run_s for _ in range(5))
+print(json.dumps(dict(import_s=imported - start, compile_s=first.compile_s,
+                      first_call_s=done - imported, run_s=runs[2])))
+"""
+
+
+def main(argv=None):
+    from benchmarks.machine import describe
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("revisions", nargs="+")
+    ap.add_argument("--repeat", type=int, default=5)
+    args = ap.parse_args(argv)
+    results = {rev: [] for rev in args.revisions}
+    with tempfile.TemporaryDirectory() as tmp:
+        trees = {}
+        for rev in args.revisions:
+            tree = os.path.join(tmp, rev.replace("/", "_"))
+            subprocess.run(["git", "-C", ROOT, "worktree", "add", "-q", "--detach", tree, rev],
+                           check=True)
+            trees[rev] = tree
+        try:
+            for i in range(args.repeat):
+                for rev, tree in trees.items():
+                    proc = subprocess.run([sys.executable, "-c", CHILD], cwd=tree,
+                                          env=dict(os.environ, PYTHONPATH=tree),
+                                          capture_output=True, text=True, check=True)
+                    results[rev].append(json.loads(proc.stdout.strip().splitlines()[-1]))
+                    print(f"{rev} #{i + 1}: {results[rev][-1]}", file=sys.stderr, flush=True)
+        finally:
+            for tree in trees.values():
+                subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", tree],
+                               check=False)
+    keys = ("import_s", "compile_s", "first_call_s", "run_s")
+
+    def cell(rows, key):
+        v = [r[key] for r in rows]
+        return f"{statistics.median(v):.2f} ({min(v):.2f}–{max(v):.2f})"
+
+    lines = [
+        f"# A fresh process's first relax(100, 0.5, 5), by revision ({describe()})",
+        "",
+        f"`python benchmarks/first_call.py {' '.join(args.revisions)} --repeat {args.repeat}`: "
+        "each revision's own defaults, fresh processes alternating between revisions; median "
+        "(min–max) in seconds.",
+        "",
+        "| revision | import | compile_s | first call | run_s (median of 5 calls) |",
+        "|---|---|---|---|---|",
+    ]
+    for rev, rows in results.items():
+        lines.append(f"| {rev} | " + " | ".join(cell(rows, k) for k in keys) + " |")
+    os.makedirs(OUT, exist_ok=True)
+    with open(os.path.join(OUT, "first_call.md"), "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
