@@ -319,3 +319,52 @@ def test_cli_reports_bad_file(tmp_path, capsys):
     p.write_text("time_s,displacement_m,force_N\n0,0,0\n")
     assert main([str(p), "--quiet"]) == 2
     assert "radius_m" in capsys.readouterr().err
+
+
+def _rough_problem(noise, cell=0.01):
+    """A linear least-squares problem r = A x - b, σ = 0.1, whose residuals carry a roughness like
+    an error-controlled model's: a pseudo-random offset of size ``noise`` per residual, constant
+    on cells of width ``cell`` in x and jumping between them (the model's step choices change
+    with θ), with the smooth Jacobian A. Returns (_lm's evaluate, the smooth optimum, its
+    standard errors)."""
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(200, 2))
+    b = A @ np.array([1.0, -2.0]) + rng.normal(0.0, 0.1, 200)
+    x_opt = np.linalg.lstsq(A, b, rcond=None)[0]
+    se = 0.1 * np.sqrt(np.diag(np.linalg.inv(A.T @ A)))
+
+    def one(x):
+        index = np.floor(x / cell).astype(np.int64) + 2**20
+        offset = np.random.default_rng([int(i) for i in index]).normal(size=b.size)
+        return A @ x - b + noise * offset, A, True
+
+    def evaluate(xs, which=None):
+        return [one(x) if which is None or k in which else None for k, x in enumerate(xs)]
+
+    return evaluate, x_opt, se
+
+
+def test_lm_ends_rough_costs_by_the_decrement():
+    """Near the optimum of a rough cost no step may lower it, down to λ > 1e12. Then the
+    Gauss–Newton decrement decides: small (the quadratic model's optimum within half a standard
+    error) is convergence at the model's accuracy, large is reported as not converged. Over a
+    scan of roughness levels, every such ending must have the verdict its distance to the smooth
+    optimum calls for, and both verdicts must occur."""
+    from fitting import _fit
+
+    verdicts = set()
+    for cell in (0.01, 0.003):
+        for noise in np.linspace(0.004, 0.03, 14):
+            evaluate, x_opt, se = _rough_problem(noise, cell)
+            (out,) = _fit._lm(evaluate, [np.array([3.0, 3.0])], [200], max_iter=300, tol=1e-4)
+            if "no decreasing step" not in out.message:
+                continue
+            off = np.max(np.abs(out.x - x_opt) / se)
+            verdicts.add(out.converged)
+            if out.converged:
+                assert "model's accuracy" in out.message
+                assert off < 0.5, (cell, noise, off, out.message)
+            else:
+                assert "decrement at" in out.message
+                assert off > 0.25, (cell, noise, off, out.message)
+    assert verdicts == {True, False}
