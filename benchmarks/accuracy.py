@@ -35,7 +35,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import lubjax  # noqa: E402
-from benchmarks.machine import label  # noqa: E402
+from benchmarks.machine import label, write_report  # noqa: E402
 from lubjax._solve import _final_contact_radius  # noqa: E402
 from lubjax._stepper import DISCRETISATION  # noqa: E402
 
@@ -182,9 +182,7 @@ def main(argv=None):
         lines.append("| " + " | ".join(
             f"{row[k]:.2e}" if isinstance(row[k], float) and k not in ("beta", "z0", "run_s")
             else (f"{row[k]:.2f}" if k == "run_s" else f"{row[k]:g}") for k in keys) + " |")
-    with open(args.out, "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_report(args.out, lines)
 
 
 if __name__ == "__main__":

@@ -52,7 +52,7 @@ def main(argv=None):
     import numpy as np
 
     from benchmarks import accuracy
-    from benchmarks.machine import describe
+    from benchmarks.machine import describe, write_report
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=5)
@@ -111,10 +111,7 @@ def main(argv=None):
             f"{statistics.median(out['runs']):.3f} | {out['steps']} ({out['rejected']}) | "
             f"{out['nodes']} | {err:.1e} | {out['load1']:.1f} |"
         )
-    os.makedirs(OUT, exist_ok=True)
-    with open(os.path.join(OUT, "default_run.md"), "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_report(os.path.join(OUT, "default_run.md"), lines)
 
 
 if __name__ == "__main__":

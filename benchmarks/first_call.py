@@ -41,7 +41,7 @@ print(json.dumps(dict(import_s=imported - start, compile_s=first.compile_s,
 
 
 def main(argv=None):
-    from benchmarks.machine import describe
+    from benchmarks.machine import describe, write_report
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("revisions", nargs="+")
@@ -85,10 +85,7 @@ def main(argv=None):
     ]
     for rev, rows in results.items():
         lines.append(f"| {rev} | " + " | ".join(cell(rows, k) for k in keys) + " |")
-    os.makedirs(OUT, exist_ok=True)
-    with open(os.path.join(OUT, "first_call.md"), "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_report(os.path.join(OUT, "first_call.md"), lines)
 
 
 if __name__ == "__main__":

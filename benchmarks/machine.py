@@ -1,4 +1,5 @@
-"""Machine description for benchmark outputs: CPU model, core count, load, threads used."""
+"""Benchmark outputs: the machine they ran on (CPU model, core count, load, threads used), and
+writing a Markdown report."""
 
 from __future__ import annotations
 
@@ -34,3 +35,12 @@ def label(info: dict | None = None) -> str:
     info = info or describe()
     return (f"{info['cpu']}, {info['cores']} cores, {info['threads']} thread(s) used, "
             f"load avg {info['load1']}")
+
+
+def write_report(path: str, lines: list[str]) -> None:
+    """Write ``lines`` as the Markdown report ``path`` (its folder made if missing) and print
+    them."""
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with open(path, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    print("\n".join(lines))

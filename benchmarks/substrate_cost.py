@@ -26,7 +26,7 @@ OUT = os.path.join(ROOT, "benchmarks", "out")
 
 def main(argv=None):
     import lubjax
-    from benchmarks.machine import describe
+    from benchmarks.machine import describe, write_report
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
@@ -73,10 +73,7 @@ def main(argv=None):
     for label, build, comp, run, acc, rej, per, peak in rows:
         lines.append(f"| {label} | {build:.2f} | {comp:.2f} | {run:.3f} | {acc} ({rej}) | "
                      f"{per * 1e3:.2f} | {per / base:.2f} | {peak:.4f} |")
-    os.makedirs(OUT, exist_ok=True)
-    with open(os.path.join(OUT, "substrate_cost.md"), "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_report(os.path.join(OUT, "substrate_cost.md"), lines)
 
 
 if __name__ == "__main__":

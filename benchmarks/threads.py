@@ -56,7 +56,7 @@ def measure(variant, repeat):
 
 
 def main(argv=None):
-    from benchmarks.machine import describe
+    from benchmarks.machine import describe, write_report
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=5)
@@ -104,10 +104,7 @@ def main(argv=None):
     lines += ["", "Run times of every run (s):", ""]
     for (load, variant), r in rows.items():
         lines.append(f"- {load} {variant}: " + ", ".join(f"{x:.3f}" for x in r["runs"]))
-    os.makedirs(OUT, exist_ok=True)
-    with open(os.path.join(OUT, "threads.md"), "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_report(os.path.join(OUT, "threads.md"), lines)
 
 
 if __name__ == "__main__":

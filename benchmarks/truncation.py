@@ -23,7 +23,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import lubjax  # noqa: E402
-from benchmarks.machine import label  # noqa: E402
+from benchmarks.machine import label, write_report  # noqa: E402
 
 RTOLS = (1e-2, 1e-3, 1e-4, 1e-5)
 TIME_RTOL = 1e-7
@@ -59,10 +59,7 @@ def main(argv=None):
             lines.append(f"| {rtol:g} | {length:.0f} | {z0:g} | {err:.1e} | {rel:.1e} | "
                          f"{'yes' if err < rtol else 'no'} |")
             print(lines[-1], flush=True)
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out, "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_report(args.out, lines)
 
 
 if __name__ == "__main__":
