@@ -628,7 +628,7 @@ def relax(
     w = z[:, None] + 0.5 * np.asarray(disc.r) ** 2 - h
     if settings.error_estimate:
         # On the host (evaluate_host): evaluating with jax compiled ~40 small programs.
-        coarse, loose = (Step(*(np.asarray(a) for a in tr.steps)) for tr in trajs[1:])
+        coarse, loose = (tr.steps for tr in trajs[1:])
         errors = {
             f: error_estimate(
                 series[f],
