@@ -125,6 +125,8 @@ DEFAULT_TOLERANCE = Tolerance()
 # β = 10³, z̄0 = 2). The film's floor is Settings.atol (1e-9): a relative control of the thinnest
 # necks (h̄ ~ 1e-7 at β = 10⁶) stalled on their rounding on coarse meshes.
 FORCE_ATOL = 1e-12
+#: Below this |F̄| (10 × its absolute tolerance) steps are backward Euler (_attempt).
+BACKWARD_EULER_FORCE = 10.0 * FORCE_ATOL
 #: How much the force's tolerance tightens per decade a tail has decayed below its peak (_attempt).
 TAIL_TIGHTENING = 3.0
 
@@ -434,7 +436,17 @@ def _attempt(
 
     # Segment start (since_restart = 0): backward Euler, lagged mobility, no estimate yet.
     # Second step: backward Euler paired with linear extrapolation. Then BDF2 with quadratic.
-    order = jnp.where((state.since_restart >= 2) & (tol.order == 2), 2, 1)
+    # Where the force has decayed below its absolute tolerance (a tail, z̄0 > 1), nothing holds
+    # it to a relative error and the steps outgrow its decay time 1/λ: BDF2's roots are complex
+    # for Δt̄λ > 1/2, so the uncontrolled tail oscillated through zero (-3e-14 in every z̄0 > 1
+    # hold, at any rtol). Backward Euler's factor 1/(1 + Δt̄λ) is positive: the tail decays
+    # without changing sign, on the same steps (the film there hardly changes). Only a force
+    # that was above the threshold and fell back: one still emerging from zero at the start
+    # keeps BDF2 (backward Euler there changed the early steps and, through them, later errors).
+    tail = (jnp.abs(state.force) < BACKWARD_EULER_FORCE) & (
+        state.force_peak >= BACKWARD_EULER_FORCE
+    )
+    order = jnp.where((state.since_restart >= 2) & (tol.order == 2) & ~tail, 2, 1)
     omega = jnp.where(order == 2, dt / dt1, 0.0)
     a0, a1, a2 = _bdf_coefficients(order, omega)
     conductance = face_conductance_extrapolated(
