@@ -17,12 +17,13 @@ def _observed_order(values, ratio=2.0):
 
 def test_space_order_is_two():
     """Conservative finite volumes with hat-function pressure: second order on smooth solutions
-    (z̄ stays ≥ 0.2 here, so there is no contact edge to spoil it). Time error negligible
-    (rtol = 1e-9)."""
+    (z̄ stays ≥ 0.2 here, so there is no contact edge to spoil it). Time error negligible:
+    at rtol = 1e-8 the successive differences agree with rtol = 1e-9's to 3e-4 of themselves
+    (order 2.1123 against 2.1125), for half the steps."""
     values = []
     for k in range(4):
         dr = 0.08 / 2**k
-        s = lubjax.Settings(rtol=1e-9, dr=dr, r_fine=1.6, length=30.0, mesh_growth=1 + 0.16 / 2**k,
+        s = lubjax.Settings(rtol=1e-8, dr=dr, r_fine=1.6, length=30.0, mesh_growth=1 + 0.16 / 2**k,
                             error_estimate=False, max_steps=100_000)
         values.append(lubjax.relax(BETA, Z0, T_END, settings=s).force[-1])
     assert 1.7 < _observed_order(values) < 2.4
