@@ -19,7 +19,8 @@ Departures from the paper, and why:
 * Conservative form instead of the expanded form (17a) with the one-sided ∂p̄/∂r̄ (17c): it is
   second-order in space on any mesh (17c is first order), and the film volume changes exactly by
   the flux through the outer face (tested).
-* Time derivative by variable-step BDF2 (the paper's backward Euler, BDF1, starts every segment).
+* Time derivative by variable-step BDF2 (the paper's backward Euler, BDF1, starts every segment
+  and steps a force tail decayed below its absolute tolerance, where BDF2 would oscillate).
   For BDF2 the mobility film is extrapolated *geometrically*, h̄* = h̄ⁿ (h̄ⁿ/h̄ⁿ⁻¹)^ω with
   ω = Δt̄ₙ/Δt̄ₙ₋₁: second-order like linear extrapolation, but positive whenever the film is.
 * Adaptive steps: the difference between the BDF2 solution and the quadratic extrapolation of the
