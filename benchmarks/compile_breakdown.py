@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
 import subprocess
 import sys
 
@@ -27,9 +26,9 @@ OUT = os.path.join(ROOT, "benchmarks", "out")
 
 CHILD = r"""
 import json, sys, time
-import jax, numpy as np, lubjax
+import lubjax
 from lubjax import _compiler, _solve
-from lubjax._stepper import discretise, rollout
+from lubjax._stepper import discretise
 from lubjax._substrate import as_substrate
 
 mode, options = sys.argv[1], json.loads(sys.argv[2])
@@ -39,19 +38,13 @@ beta, z0, t_end = 100.0, 0.5, 5.0
 settings = lubjax.Settings()
 history = _solve._drive_of(None, None)
 substrate = as_substrate(None)
-mesh = settings.mesh(_solve._contact_refinement(settings, history, z0, beta, t_end),
-                     _solve._interior_refinement(settings, beta, t_end),
-                     _solve._rim_refinement(settings, beta, t_end))
+mesh = _solve._relax_mesh(settings, history, z0, beta, t_end)
 programs = {"run": discretise(mesh, substrate), "coarse": discretise(mesh.coarsened(), substrate)}
 tol = settings.tolerance()
 
 
-def run(d, b, z, h, s, te, pt, t):
-    return rollout(d, b, z, h, te, t, pt, substrate=s, mode="forward")
-
-
 def lower(disc):
-    return jax.jit(run).lower(disc, 1.0, 1.0, history, substrate, 1.0, np.zeros(0), tol)
+    return _solve._lower_rollout(disc, history, substrate, tol, 0)
 
 
 out = {}
@@ -78,7 +71,7 @@ COLUMNS = ("run_trace_s", "run_compile_s", "coarse_trace_s", "coarse_compile_s",
 
 
 def main(argv=None):
-    from benchmarks.machine import label, write_report
+    from benchmarks.machine import label, median_range, write_report
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=4)
@@ -97,10 +90,7 @@ def main(argv=None):
             print(f"  {i + 1}/{args.repeat} {v[0]} {v[1]}: {results[v][-1]}", flush=True)
 
     def cell(rows, key):
-        vals = [r[key] for r in rows if key in r]
-        if not vals:
-            return "—"
-        return f"{statistics.median(vals):.2f} ({min(vals):.2f}–{max(vals):.2f})"
+        return median_range(r[key] for r in rows) if key in rows[0] else "—"
 
     lines = [
         "# Compile time of the default run, by program and phase",

@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -41,7 +40,7 @@ print(json.dumps(dict(import_s=imported - start, compile_s=first.compile_s,
 
 
 def main(argv=None):
-    from benchmarks.machine import describe, write_report
+    from benchmarks.machine import describe, median_range, write_report
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("revisions", nargs="+")
@@ -69,10 +68,6 @@ def main(argv=None):
                                check=False)
     keys = ("import_s", "compile_s", "first_call_s", "run_s")
 
-    def cell(rows, key):
-        v = [r[key] for r in rows]
-        return f"{statistics.median(v):.2f} ({min(v):.2f}–{max(v):.2f})"
-
     lines = [
         f"# A fresh process's first relax(100, 0.5, 5), by revision ({describe()})",
         "",
@@ -84,7 +79,8 @@ def main(argv=None):
         "|---|---|---|---|---|",
     ]
     for rev, rows in results.items():
-        lines.append(f"| {rev} | " + " | ".join(cell(rows, k) for k in keys) + " |")
+        cells = (median_range(r[k] for r in rows) for k in keys)
+        lines.append(f"| {rev} | " + " | ".join(cells) + " |")
     write_report(os.path.join(OUT, "first_call.md"), lines)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import platform
+import statistics
 
 
 def cpu_model() -> str:
@@ -44,3 +45,9 @@ def write_report(path: str, lines: list[str]) -> None:
     with open(path, "w") as fh:
         fh.write("\n".join(lines) + "\n")
     print("\n".join(lines))
+
+
+def median_range(values) -> str:
+    """``median (min–max)`` of repeated timings, two decimals."""
+    values = list(values)
+    return f"{statistics.median(values):.2f} ({min(values):.2f}–{max(values):.2f})"

@@ -528,6 +528,25 @@ _SERIES = ("t", "force", "film_min", "film_center", "outflow", "gap", "velocity"
            "elastic_energy", "dissipation")
 
 
+def _relax_mesh(settings, drive, z0, beta, t_end) -> Mesh:
+    """The mesh :func:`relax` runs on: the tolerance's, refined for the contact the run ends in."""
+    return settings.mesh(_contact_refinement(settings, drive, z0, beta, t_end),
+                         _interior_refinement(settings, float(beta), t_end),
+                         _rim_refinement(settings, float(beta), t_end))
+
+
+def _forward_rollout(d, b, z, h, s, te, pt, t):
+    return rollout(d, b, z, h, te, t, pt, substrate=s, mode="forward")
+
+
+def _lower_rollout(disc, drive, substrate, tol, n_profiles):
+    """Trace and lower :func:`relax`'s program for one mesh (β, z̄0, t_end, the profile times
+    and the tolerance's numbers are its arguments)."""
+    return jax.jit(_forward_rollout).lower(
+        disc, 1.0, 1.0, drive, substrate, 1.0, np.zeros(n_profiles), tol
+    )
+
+
 def _compiled_rollouts(runs, history, substrate) -> tuple[list, float]:
     """AOT-compile once per (mesh size, drive and substrate structure, tolerance structure,
     profile count): lets us report compile time apart. The tolerance's numbers are arguments,
@@ -535,9 +554,6 @@ def _compiled_rollouts(runs, history, substrate) -> tuple[list, float]:
     (discretisation, tolerance, profile times) each; the programs not yet compiled are traced
     one after another and compiled side by side (lubjax/_compiler.py). Returns the executables
     and the seconds spent (tracing, lowering and compiling)."""
-
-    def run(d, b, z, h, s, te, pt, t):
-        return rollout(d, b, z, h, te, t, pt, substrate=s, mode="forward")
 
     def key_of(disc, tol, ptimes):
         leaves, treedef = jax.tree_util.tree_flatten((history, substrate, tol))
@@ -548,9 +564,7 @@ def _compiled_rollouts(runs, history, substrate) -> tuple[list, float]:
     new = {k: r for k, r in zip(keys, runs) if k not in _COMPILED}
     if new:
         def lowerer(d, tol, pt):
-            return lambda: jax.jit(run).lower(
-                d, 1.0, 1.0, history, substrate, 1.0, np.zeros(pt.size), tol
-            )
+            return lambda: _lower_rollout(d, history, substrate, tol, pt.size)
 
         compiled = _compiler.compile_all(lowerer(*r) for r in new.values())
         _COMPILED.update(zip(new, compiled))
@@ -597,9 +611,7 @@ def relax(
     t_start = float(history.t_start)
     t_end = _check_t_end(t_end, t_start)
     ptimes = _check_times(profile_times, "profile_times", t_start, t_end)
-    mesh = settings.mesh(_contact_refinement(settings, history, z0, beta, t_end),
-                         _interior_refinement(settings, float(beta), t_end),
-                         _rim_refinement(settings, float(beta), t_end))
+    mesh = _relax_mesh(settings, history, z0, beta, t_end)
     substrate = as_substrate(substrate)
     disc = discretise(mesh, substrate)
     tol = settings.tolerance()
