@@ -109,8 +109,11 @@ class _Drive:
     def initial_velocity(self):
         return 0.0
 
-    def row(self, t_new, z0, dt, a0, a1, a2, gap, gap_prev, velocity, velocity_prev):
-        """(α, s, b) of the closing row α F̄ⁿ⁺¹ + s Δz̄ = b."""
+    def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
+            force):
+        """(α, s, b) of the closing row α F̄ⁿ⁺¹ + s Δz̄ = b for the step tⁿ = ``t`` → tⁿ⁺¹ =
+        ``t_new``; ``gap_step`` is the last step's Δz̄ⁿ = z̄ⁿ - z̄ⁿ⁻¹ as solved (not a difference of
+        the stored gaps, which rounds it to the gap's ulp); ``force`` is F̄ⁿ."""
         raise NotImplementedError
 
 
@@ -135,9 +138,13 @@ class Travel(_Drive):
         # Under a monotone approach or hold the film is only squeezed: its pressure pushes back.
         return _monotone_approach(self.history)
 
-    def row(self, t_new, z0, dt, a0, a1, a2, gap, gap_prev, velocity, velocity_prev):
-        # z̄0 - d̄(tⁿ⁺¹) - z̄ⁿ: exactly zero while the sphere rests (z̄ⁿ was computed the same way).
-        return 0.0, 1.0, (z0 - self.history.travel(t_new)) - gap
+    def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
+            force):
+        # Δz̄ = d̄(tⁿ) - d̄(tⁿ⁺¹), not (z̄0 - d̄(tⁿ⁺¹)) - z̄ⁿ: that difference of O(1) gaps rounds
+        # Δz̄ to the ulp of z̄ (2.2e-16 at z̄ ~ 1), a relative error of 1 in the squeeze velocity
+        # once Δz̄ is that small (a smooth start, d̄ ∝ t̄², at Δt̄ ~ 1e-11: the layer's force
+        # jumped 15 % between attempts and the steps collapsed). Zero while the sphere rests.
+        return 0.0, 1.0, self.history.travel(t) - self.history.travel(t_new)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -163,7 +170,8 @@ class Load(_Drive):
     def load(self, t):
         return self.scale * self.history.travel(t)
 
-    def row(self, t_new, z0, dt, a0, a1, a2, gap, gap_prev, velocity, velocity_prev):
+    def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
+            force):
         return 1.0, 0.0, self.load(t_new)
 
 
@@ -183,9 +191,13 @@ class Spring(_Drive):
     def force_nonnegative(self):
         return _monotone_approach(self.history)
 
-    def row(self, t_new, z0, dt, a0, a1, a2, gap, gap_prev, velocity, velocity_prev):
+    def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
+            force):
         k = self.stiffness
-        return 1.0, -k, k * (self.history.travel(t_new) - (z0 - gap))
+        # The spring's stretch at tⁿ is F̄ⁿ/K̄ (the last row), so b = K̄(d̄ⁿ⁺¹ - d̄ⁿ) + F̄ⁿ rather
+        # than K̄(d̄ⁿ⁺¹ - (z̄0 - z̄ⁿ)), whose O(1) difference rounds the stretch to the ulp of z̄
+        # (as Travel's row explains).
+        return 1.0, -k, k * (self.history.travel(t_new) - self.history.travel(t)) + force
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -223,9 +235,10 @@ class FreeSphere(_Drive):
     def initial_velocity(self):
         return self.velocity
 
-    def row(self, t_new, z0, dt, a0, a1, a2, gap, gap_prev, velocity, velocity_prev):
+    def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
+            force):
         g = self.inverse_mass
-        b = a0 * a2 * (gap - gap_prev) - dt * (a1 * velocity + a2 * velocity_prev)
+        b = a0 * a2 * gap_step - dt * (a1 * velocity + a2 * velocity_prev)
         return -(dt**2) * g, a0**2, b - dt**2 * g * self.weight
 
 

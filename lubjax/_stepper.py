@@ -153,6 +153,7 @@ class State(NamedTuple):
     film_prev2: jax.Array
     gap: jax.Array  # z̄ⁿ
     gap_prev: jax.Array
+    gap_step: jax.Array  # Δz̄ⁿ = z̄ⁿ - z̄ⁿ⁻¹ as solved (BDF2's history; gap - gap_prev rounds it)
     velocity: jax.Array  # dz̄/dt̄ at level n by the step's BDF formula (a free sphere's state)
     velocity_prev: jax.Array
     velocity_prev2: jax.Array
@@ -382,6 +383,7 @@ def _initial_state(disc, beta, drive, substrate, z0, tol: Tolerance, profile_tim
         film_prev2=h,
         gap=z_start,
         gap_prev=z_start,
+        gap_step=jnp.zeros_like(z_start),
         velocity=v0,
         velocity_prev=v0,
         velocity_prev2=v0,
@@ -453,9 +455,10 @@ def _attempt(
     conductance = face_conductance_extrapolated(
         disc, state.film, state.film_prev, state.gap, state.gap_prev, omega
     )
-    step_before = state.gap - state.gap_prev
+    step_before = state.gap_step
     row = drive.row(
-        t_new, z0, dt, a0, a1, a2, state.gap, state.gap_prev, state.velocity, state.velocity_prev
+        t, t_new, z0, dt, a0, a1, a2, state.gap, step_before, state.velocity, state.velocity_prev,
+        state.force,
     )
     # The substrate's memory (module _substrate): ūⁿ⁺¹ = c p̄ⁿ⁺¹ + Σ_k memory_k; none if elastic.
     j0, jk, lam = substrate.compliance()
@@ -601,6 +604,7 @@ def _attempt(
         film_prev2=state.film_prev,
         gap=z_new,
         gap_prev=state.gap,
+        gap_step=dz,
         velocity=velocity,
         velocity_prev=state.velocity,
         velocity_prev2=state.velocity_prev,

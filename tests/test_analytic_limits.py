@@ -16,6 +16,23 @@ def test_rigid_squeeze_film_during_loading():
     assert np.max(np.abs(res.force[sel] / rigid - 1)) < 0.01
 
 
+@pytest.mark.parametrize("kind", ["travel", "spring"])
+def test_rigid_squeeze_film_at_a_crawl(kind):
+    """The same limit at a speed of 1e-13: per step the gap moves by ~1e-14, a few ulps of z̄0 = 2.
+    The step's Δz̄ must come from the travel's own increment: formed as a difference of gaps it
+    was rounded to the ulp of z̄ (the force was 10 % off for the travel, 6 % for a spring)."""
+    beta, z0, speed = 1e4, 2.0, 1e-13
+    s = np.linspace(0.0, 1.0, 11)
+    history = lubjax.SampledTravel(s, speed * s, breakpoints=(0.0,))
+    # K̄ = 100: the spring stretches by F̄/K̄ ~ 1e-19, the sphere follows the stage
+    drive = lubjax.Travel(history) if kind == "travel" else lubjax.Spring(100.0, history)
+    res = lubjax.relax(beta, z0, t_end=1.0, drive=drive)
+    t = np.linspace(0.05, 1.0, 20)
+    rigid = lubjax.rigid_squeeze_force(z0 - speed * t, -speed, beta)
+    assert res.ok
+    assert np.max(np.abs(res.at(t) / rigid - 1)) < 1e-3
+
+
 @pytest.mark.parametrize("growth,bound", [(1.05, 1e-4), (1.3, 5e-4), (1.5, 1e-3)])
 def test_rigid_squeeze_force_on_a_coarse_far_field(growth, bound):
     """The far field on its own: β = 10⁶ (rigid, eq 12b) with a tight time tolerance and
