@@ -9,7 +9,7 @@ bias. Here:
 
 1. clean traces of the same tests on a **bonded incompressible 5 mm layer** (H̄ = H/√(R d_c) =
    10.0, 9.4, 9.0), made by ``data/make_synthetic.py``'s generator (``clean_force(...,
-   layer_m=5e-3)``: rtol 1e-7 (force floor raised, LAYER_FORCE_ATOL there), Δr̄ = 0.01,
+   layer_m=5e-3)``: rtol 1e-7, Δr̄ = 0.01,
    544 nodes, L̄ = 1000, the input sampled at 40,001 points; the fits use
    ``fitting.FIT_SETTINGS``, rtol 3e-4, 132 nodes), cached as
    ``data/clean/layer5mm_dc*_clean.csv`` (generated when missing);
@@ -70,7 +70,6 @@ def clean_trace(um, log):
         "true_indent_m": f"{indent:.6g}", "true_speed_m_s": f"{ms.SPEED:.6g}",
         "true_beta": f"{test.beta:.6g}", "substrate": "bonded incompressible layer on a rigid base",
         "true_layer_thickness_m": f"{LAYER_M:g}", "true_layer_thickness_bar": f"{hbar:.6g}"})
-    meta["generator"] += f", layer force floor {ms.LAYER_FORCE_ATOL:g}"
     trace = fitting.make_trace(times, ms.travel(times, indent), force, ms.RADIUS,
                                dict(meta, noise_N="0"))
     fitting.write_trace(path, trace)

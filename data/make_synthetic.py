@@ -28,11 +28,14 @@ L̄ = 1000, 544 nodes), with the input history sampled at 40,001 points of its c
 sees only the 100 Hz record). The fine solution is read at the sample times by the stepper's own
 interpolant (``Result.at``). The noiseless traces go to ``data/clean/`` (tests add their own
 noise draws to them), the noisy ones to ``data/``. True values are in each file's header.
+
+``python data/make_synthetic.py [STEM ...]`` writes the traces (all, or those named);
+``python data/make_synthetic.py --compare [STEM ...]`` recomputes the clean ones and prints how far
+the current solver is from the files, writing nothing.
 """
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 import sys
@@ -64,28 +67,6 @@ CREEP_RAMP_S = 1.0
 CREEP_HOLD_S = 29.0
 FINE = lubjax.Settings(rtol=1e-7, atol=1e-16, dr=0.01, mesh_growth=1.02, length=1000.0,
                        max_steps=200_000, error_estimate=False)
-#: Layer traces: the stepper's absolute force floor (lubjax._stepper.FORCE_ATOL, 1e-12) is raised
-#: to 1e-10 (5e-10 of the smallest peak F̄ here) for the run. On a layer the force emerging from
-#: zero under the stage's smooth start (v = 0 at t_on) carries more rounding from the solve than
-#: 1e-12, the error test cannot pass and the step size collapses at t̄ ≈ 2.4e-7 (at rtol 1e-7
-#: with the ideal ramp too); the half-space runs are unaffected. Not fixed in the stepper here
-#: (tests/test_layer.py, strict xfail). The floor is read when a run is compiled: it must be the
-#: first run of its shape in the process (a cached executable would keep 1e-12).
-LAYER_FORCE_ATOL = 1e-10
-
-
-@contextlib.contextmanager
-def _force_floor(value):
-    from lubjax import _stepper
-
-    old = _stepper.FORCE_ATOL
-    _stepper.FORCE_ATOL = value
-    try:
-        yield
-    finally:
-        _stepper.FORCE_ATOL = old
-
-
 GENERATOR = ("data/make_synthetic.py, lubjax Settings(rtol=1e-7, atol=1e-16, dr=0.01, "
              "mesh_growth=1.02, length=1000), input sampled at 40001 points")
 
@@ -146,9 +127,8 @@ def clean_force(indent, viscosity, times, kind="", layer_m=None):
     # K̄ = π k/(2E*√(R d_c)) (lubjax/_drives.py)
     stiffness = math.pi * SPRING_N_M / (2 * test.E_star * math.sqrt(RADIUS * indent))
     drive = lubjax.Spring(stiffness, history) if kind == "spring" else lubjax.Travel(history)
-    with _force_floor(LAYER_FORCE_ATOL) if layer_m is not None else contextlib.nullcontext():
-        res = lubjax.relax(test.beta, test.z0_bar, t_bar_end, drive=drive, substrate=substrate,
-                           settings=FINE)
+    res = lubjax.relax(test.beta, test.z0_bar, t_bar_end, drive=drive, substrate=substrate,
+                       settings=FINE)
     tb = (times - QUIET_S) / tc
     force = np.where(tb <= 0, 0.0, res.at(np.clip(tb, 0.0, t_bar_end)))
     return test, test.force_scale * force
@@ -199,6 +179,29 @@ def _write(stem, times, disp, force, meta, noisy_channel, sigma, seed, clean=Tru
     write_trace(os.path.join(HERE, f"{stem}.csv"), make_trace(times, disp, force, RADIUS, meta))
 
 
+def compare(only=None):
+    """Recompute the clean relaxation traces with the current solver and print how far each is
+    from the file in data/clean/ (max |ΔF| over the samples, as a fraction of the peak); writes
+    nothing. The creep trace (no clean file) is skipped."""
+    from fitting import read_trace
+
+    # the 5 mm layer's traces are benchmarks/layer_fit_bias.py's, from clean_force too
+    layer5mm = [(f"layer5mm_dc{um}", um * 1e-6, 100.0, 0.01, 0, "layer:5e-3")
+                for um in (126, 140, 154)]
+    for stem, indent, viscosity, _, _, kind in CASES + layer5mm:
+        path = os.path.join(HERE, "clean", f"{stem}_clean.csv")
+        if (only and stem not in only) or not os.path.exists(path):
+            continue
+        start = time.perf_counter()
+        stored = read_trace(path)
+        layer_m = float(kind.split(":")[1]) if kind.startswith("layer:") else None
+        _, force = clean_force(indent, viscosity, stored.time, "" if layer_m else kind, layer_m)
+        peak = float(np.max(np.abs(stored.force)))
+        worst = float(np.max(np.abs(force - stored.force))) / peak
+        print(f"{stem}: max |F - F_file| = {worst:.2e} of the peak "
+              f"({time.perf_counter() - start:.1f} s)", flush=True)
+
+
 def main(only=None):
     times = np.arange(0.0, QUIET_S + 154e-6 / SPEED + HOLD_S, 1.0 / RATE_HZ)
     cache = {}
@@ -245,5 +248,9 @@ def main(only=None):
 
 
 if __name__ == "__main__":
+    args = sys.argv[1:]
     with single_threaded_blas():
-        main(sys.argv[1:])
+        if args[:1] == ["--compare"]:
+            compare(args[1:])
+        else:
+            main(args)
