@@ -156,17 +156,26 @@ def test_separate_and_joint_fits_of_the_paper_traces():
     batched LM call (one vmap), then jointly with E* and η shared and z0 and the offset per
     trace: both recover the truth within three standard errors, the reduced χ² is near 1 (1 %
     white noise), and the joint errors of the shared parameters are smaller than every separate
-    fit's (three traces' worth of data: about 1/√3 of them)."""
+    fit's (three traces' worth of data: about 1/√3 of them).
+
+    Within 3.5 rather than 3 standard errors: the files are fixed noise draws, and the noise of
+    paper_dc140.csv alone puts its z0 at -2.9 standard errors (its noise-free twin in
+    data/clean/ fits to -0.2: `python benchmarks/time_error.py --fits`), so at 3 this test
+    passed or failed on 0.1 σ of discretisation error, in whichever direction the stepper's
+    details put it (-2.85 before the mobility's second stage, -3.15 after; -2.98 and -3.01 at
+    rtol 1e-5). Nine z-scores of calibrated errors exceed 3 somewhere with probability 2.4 %,
+    3.5 with 0.4 %; that the errors are calibrated, bias included, is tested over 24 noise
+    draws in tests/test_fitting_uncertainty.py."""
     traces = [_trace(s) for s in PAPER]
     separate = fitting.fit_traces(traces)
     for tr, res in zip(traces, separate, strict=True):
-        _assert_recovers(res, tr)
+        _assert_recovers(res, tr, z_max=3.5)
         assert res.rms_residual == pytest.approx(float(tr.metadata["noise_N"]), rel=0.15)
         assert res.stats["reduced_chi2"] == pytest.approx(1.0, abs=0.15)
         assert res.stats["noise_model"] == "white"
     joint = fitting.fit_traces(traces, shared=("E_star", "viscosity"))
     for tr, res in zip(traces, joint, strict=True):
-        _assert_recovers(res, tr)
+        _assert_recovers(res, tr, z_max=3.5)
         assert res.shared == ("E_star", "viscosity") and len(res.group) == 3
         assert res.stats["n_samples"] == sum(t.time.size for t in traces)
         for n in ("E_star", "viscosity"):
@@ -216,16 +225,21 @@ def test_model_comparison_asks_for_viscoelasticity_only_when_it_is_there():
 
 def test_mapped_and_vmapped_batches_fit_alike_and_map_skips_finished_traces():
     """batching="map" (each trace in turn, finished ones skipped) and "vmap" (all at once) are
-    two evaluations of one model: the fits agree to a small part of their errors (the two
-    compilations round differently, so steps may differ at the model's accuracy). A mapped call
-    asked for one problem computes only that one."""
+    two evaluations of one model: the fits agree to a small part of their errors. Not to the
+    last bit: the two compilations round differently, and where a step's error ratio sits at 1
+    that flips an accept/reject decision, so the runs take other, equally valid steps and the
+    optima differ by part of the fit's discretisation error. Measured (this test's traces and
+    mesh, rtol 3e-5, 1e-4, 3e-4): the largest difference 0.0009-0.107 σ with the mobility's
+    second stage, 0.007-0.095 σ before it, by which rtol happens to flip a decision, so the
+    bound is 0.2 σ; a batching bug (traces mixed, a finished trace stepped on) moves a fit by
+    many σ. A mapped call asked for one problem computes only that one."""
     traces = [_short(s, 2.0, clean=False)[0] for s in PAPER[:2]]
     fits = {mode: fitting.fit_traces(traces, settings=COARSE, batching=mode, model_error=False)
             for mode in ("map", "vmap")}
     for a, b in zip(fits["map"], fits["vmap"], strict=True):
         assert a.converged and b.converged
         for n in ("E_star", "viscosity", "z0"):
-            assert abs(a.values[n] - b.values[n]) < 0.05 * a.stderr[n], n
+            assert abs(a.values[n] - b.values[n]) < 0.2 * a.stderr[n], n
     from fitting import _fit, _model
 
     spec = fitting.ModelSpec()
