@@ -1,7 +1,7 @@
 """A fresh process's first ``relax(100, 0.5, 5)`` at each git revision given, with that
 revision's defaults: what a user waits for, measured side by side in one run.
 
-    python benchmarks/first_call.py f1635a7 6c71a6e HEAD [--repeat 5]
+    python benchmarks/first_call.py f1635a7 6c71a6e HEAD [--repeat 5] [--t-end 1e6]
 
 Issue "Error control", item 8 asks for no slower than "today's 0.16 s run / 0.9 s compile": the
 hand-tuned grid of commit f1635a7 (before the error-controlled stepper), measured on another
@@ -9,8 +9,9 @@ machine. Machines differ (the same code's compile took 0.9 s there and 1.5–1.9
 so this runs that revision and others on *this* machine, alternating: each revision is checked
 out into a temporary git worktree and imported from there in fresh processes (``--repeat`` each,
 round-robin). Columns: import time, ``Result.compile_s`` of the first call, the first call's
-wall time, and the median ``run_s`` of five further calls. Writes
-benchmarks/out/first_call.md.
+wall time, the median ``run_s`` of five further calls, and the accepted steps. Writes
+benchmarks/out/first_call.md; ``--t-end`` runs ``relax(100, 0.5, t_end)`` instead (a long hold:
+the steps the neck's thinning costs) and writes benchmarks/out/first_call_t<t_end>.md.
 """
 
 from __future__ import annotations
@@ -27,15 +28,17 @@ sys.path.insert(0, ROOT)
 OUT = os.path.join(ROOT, "benchmarks", "out")
 
 CHILD = r"""
-import json, time
+import json, sys, time
+t_end = float(sys.argv[1])
 start = time.perf_counter()
 import lubjax
 imported = time.perf_counter()
-first = lubjax.relax(100, 0.5, 5.0)
+first = lubjax.relax(100, 0.5, t_end)
 done = time.perf_counter()
-runs = sorted(lubjax.relax(100, 0.5, 5.0).run_s for _ in range(5))
+runs = sorted(lubjax.relax(100, 0.5, t_end).run_s for _ in range(5))
 print(json.dumps(dict(import_s=imported - start, compile_s=first.compile_s,
-                      first_call_s=done - imported, run_s=runs[2])))
+                      first_call_s=done - imported, run_s=runs[2],
+                      steps=int(getattr(first, "accepted", -1)))))
 """
 
 
@@ -45,6 +48,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("revisions", nargs="+")
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--t-end", type=float, default=5.0)
     args = ap.parse_args(argv)
     results = {rev: [] for rev in args.revisions}
     with tempfile.TemporaryDirectory() as tmp:
@@ -57,7 +61,7 @@ def main(argv=None):
         try:
             for i in range(args.repeat):
                 for rev, tree in trees.items():
-                    proc = subprocess.run([sys.executable, "-c", CHILD], cwd=tree,
+                    proc = subprocess.run([sys.executable, "-c", CHILD, repr(args.t_end)], cwd=tree,
                                           env=dict(os.environ, PYTHONPATH=tree),
                                           capture_output=True, text=True, check=True)
                     results[rev].append(json.loads(proc.stdout.strip().splitlines()[-1]))
@@ -67,21 +71,24 @@ def main(argv=None):
                 subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", tree],
                                check=False)
     keys = ("import_s", "compile_s", "first_call_s", "run_s")
-
+    default = args.t_end == 5.0
+    command = f"python benchmarks/first_call.py {' '.join(args.revisions)} --repeat {args.repeat}"
     lines = [
-        f"# A fresh process's first relax(100, 0.5, 5), by revision ({describe()})",
+        f"# A fresh process's first relax(100, 0.5, {args.t_end:g}), by revision ({describe()})",
         "",
-        f"`python benchmarks/first_call.py {' '.join(args.revisions)} --repeat {args.repeat}`: "
+        f"`{command}{'' if default else f' --t-end {args.t_end:g}'}`: "
         "each revision's own defaults, fresh processes alternating between revisions; median "
         "(min–max) in seconds.",
         "",
-        "| revision | import | compile_s | first call | run_s (median of 5 calls) |",
-        "|---|---|---|---|---|",
+        "| revision | import | compile_s | first call | run_s (median of 5 calls) | steps |",
+        "|---|---|---|---|---|---|",
     ]
     for rev, rows in results.items():
-        cells = (median_range(r[k] for r in rows) for k in keys)
+        cells = [median_range(r[k] for r in rows) for k in keys]
+        cells.append(str(rows[0]["steps"]))
         lines.append(f"| {rev} | " + " | ".join(cells) + " |")
-    write_report(os.path.join(OUT, "first_call.md"), lines)
+    name = "first_call.md" if default else f"first_call_t{args.t_end:g}.md"
+    write_report(os.path.join(OUT, name), lines)
 
 
 if __name__ == "__main__":

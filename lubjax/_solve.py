@@ -593,7 +593,7 @@ def relax(
     Args:
         beta: β (eq 8e), in [1e-4, 1e9]. z0: z̄0 = z0/d_c, in [1e-4, 1e3].
         t_end: final time t̄ (t_c units). Steps grow as the solution slows: a hold to t̄ = 10⁶
-            costs ~3150 steps at β = 100, z̄0 = 0.5 (the neck at the contact edge keeps thinning).
+            costs ~1800 steps at β = 100, z̄0 = 0.5 (the neck at the contact edge keeps thinning).
         history: indenter travel, ``RampHold()`` (eqs 8c,d; eq 23 with ``t_accel``) or
             ``SampledTravel`` (a measured history).
         drive: instead of ``history``, any drive: ``Travel(history)``, ``Load`` (force
