@@ -302,9 +302,10 @@ def linear_step(
     in a long hold at z̄0 > 1) keeps its relative accuracy and its sign. The flux operator T is
     tridiagonal with face conductances g_{i+1/2} = β · ``conductance`` (:func:`face_conductance`):
     (Tp̄)_i = g_{i+1/2}(p̄_{i+1} - p̄_i) - g_{i-1/2}(p̄_i - p̄_{i-1}).
-    Unknowns p̄_0..p̄_{N-2} (p̄_{N-1} = 0, eq 22b) and Δz̄: one N×N dense solve.
+    Unknowns p̄_0..p̄_{N-2} (p̄_{N-1} = 0, eq 22b) and Δz̄: one N×N dense LU factorisation.
     With a prescribed travel the row is (0, 1, b): partial pivoting never picks it before the
-    last column, so Δz̄ = b exactly. Returns (p̄ⁿ⁺¹, Δz̄, outflow, conductances g).
+    last column, so Δz̄ = b exactly. Returns (p̄ⁿ⁺¹, Δz̄, conductances g, solve), ``solve`` the
+    system's inverse on the same factors (:func:`_factorised`) for the mobility's second stage.
     """
     g = beta * conductance
     n = disc.r.shape[0] - 1
@@ -333,8 +334,7 @@ def linear_step(
     solve = _factorised(matrix)
     x = solve(rhs)
     p = jnp.concatenate([x[:-1], jnp.zeros(1, x.dtype)])
-    outflow = -g[-1] * (p[-1] - p[-2])
-    return p, x[-1], outflow, g, solve
+    return p, x[-1], g, solve
 
 
 def _factorised(matrix):
@@ -522,7 +522,7 @@ def _attempt(
             memory = memory_known + creep[:, None] * p[None, :]
             return memory, j0 * p + jnp.sum(memory, axis=0)
 
-    p, dz, outflow, g, solve = linear_step(
+    p, dz, g, solve = linear_step(
         disc, beta, conductance, dt, a0, -a2 * step_before, compliance, known_load, row
     )
     # Second stage, on the same factors: the conductances of the film the first stage gives,
