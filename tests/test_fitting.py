@@ -165,7 +165,13 @@ def test_separate_and_joint_fits_of_the_paper_traces():
     details put it (-2.85 before the mobility's second stage, -3.15 after; -2.98 and -3.01 at
     rtol 1e-5). Nine z-scores of calibrated errors exceed 3 somewhere with probability 2.4 %,
     3.5 with 0.4 %; that the errors are calibrated, bias included, is tested over 24 noise
-    draws in tests/test_fitting_uncertainty.py."""
+    draws in tests/test_fitting_uncertainty.py.
+
+    The model's own bias is held much tighter, on the noise-free twins (data/clean/, the fine
+    generator's traces the noisy files were drawn from): fitted at the same settings they land
+    within 0.5 of the noisy fits' standard errors of the truth (measured 0.005-0.21), and
+    their residuals are below 5 % of the noise (measured 0.6-0.9 %). LM's stop is flagged
+    there (a decrement relative to a residual variance of ~0 cannot be met), not asserted."""
     traces = [_trace(s) for s in PAPER]
     separate = fitting.fit_traces(traces)
     for tr, res in zip(traces, separate, strict=True):
@@ -173,6 +179,12 @@ def test_separate_and_joint_fits_of_the_paper_traces():
         assert res.rms_residual == pytest.approx(float(tr.metadata["noise_N"]), rel=0.15)
         assert res.stats["reduced_chi2"] == pytest.approx(1.0, abs=0.15)
         assert res.stats["noise_model"] == "white"
+    twins = fitting.fit_traces([_trace(s, clean=True) for s in PAPER])
+    for tr, noisy, twin in zip(traces, separate, twins, strict=True):
+        bias = {n: (twin.values[n] - float(tr.metadata[TRUE[n]])) / noisy.stderr[n]
+                for n in ("E_star", "viscosity", "z0")}
+        assert all(abs(v) < 0.5 for v in bias.values()), (tr.name, bias)
+        assert twin.rms_residual < 0.05 * float(tr.metadata["noise_N"]), tr.name
     joint = fitting.fit_traces(traces, shared=("E_star", "viscosity"))
     for tr, res in zip(traces, joint, strict=True):
         _assert_recovers(res, tr, z_max=3.5)
