@@ -171,7 +171,7 @@ def main(argv=None):
             z0 = d["z0"]
             X, Y = np.meshgrid(d["betas"], d["thick"])
             err = d["err"][z0]
-            cs = ax.contourf(X, Y, np.log10(np.maximum(err, 1e-6)), extend="max",
+            cs = ax.contourf(X, Y, np.log10(np.maximum(err, 1e-6)), extend="both",
                              levels=np.arange(-5, 0.01, 0.5), cmap="viridis")  # fmt: skip
             ax.contour(X, Y, err, levels=[0.01], colors="r", linewidths=2)
             for h, b, _dc in paper_points():
