@@ -164,8 +164,10 @@ class Settings:
 
     Attributes:
         rtol, atol: local error tolerance of every step on the film h̄ at each node,
-            |error| ≤ atol + rtol·|h̄|, and on F̄, |error| ≤ 1e-12 + rtol·max(|F̄|,
-            force_floor × peak). The global error is a few times rtol (README table).
+            |error| ≤ atol + rtol·|h̄|, on F̄, |error| ≤ 1e-12 + rtol·max(|F̄|,
+            force_floor × peak), and on a free gap z̄ (force control, spring, free sphere),
+            |error| ≤ atol + rtol·max|z̄ - z̄_start|. The global error is a few times rtol
+            (README tables).
         dr: mesh spacing in the fine zone [0, r_fine] (default: from rtol).
         r_fine: edge of the uniform fine zone (covers the Hertz radius √(1-z̄0) ≤ 1 and its rim).
         length: domain length L̄ with p̄(L̄) = 0; force truncation ≈ 4z̄/L̄² (default: from rtol).

@@ -118,7 +118,8 @@ class Tolerance:
     are static. Closed over (as ``sweep`` and the fits do), it is a constant of the program.
 
     rtol, atol: the step's estimated local error e (film h̄ at every node, and F̄) must satisfy
-        |e| ≤ atol + rtol·|value|. initial_step: the first step after t̄_start and after each
+        |e| ≤ atol + rtol·|value|; a free gap z̄, |e| ≤ atol + rtol·max|z̄ - z̄_start|.
+        initial_step: the first step after t̄_start and after each
         velocity jump, divided by max(1, β). order: 2 (BDF2) or 1 (backward Euler throughout).
         max_steps: the attempt budget (accepted + rejected). force_floor: F̄ is held to rtol
         relative to max(|F̄|, force_floor × its peak so far).
@@ -165,6 +166,9 @@ class State(NamedTuple):
     film_prev2: jax.Array
     gap: jax.Array  # z̄ⁿ
     gap_prev: jax.Array
+    gap_prev2: jax.Array
+    gap_start: jax.Array  # z̄ at t̄_start
+    excursion_peak: jax.Array  # max |z̄ - z̄_start| so far (the approach's scale)
     gap_step: jax.Array  # Δz̄ⁿ = z̄ⁿ - z̄ⁿ⁻¹ as solved (BDF2's history; gap - gap_prev rounds it)
     velocity: jax.Array  # dz̄/dt̄ at level n by the step's BDF formula (a free sphere's state)
     velocity_prev: jax.Array
@@ -420,6 +424,9 @@ def _initial_state(disc, beta, drive, substrate, z0, tol: Tolerance, profile_tim
         film_prev2=h,
         gap=z_start,
         gap_prev=z_start,
+        gap_prev2=z_start,
+        gap_start=z_start,
+        excursion_peak=jnp.zeros_like(z_start),
         gap_step=jnp.zeros_like(z_start),
         velocity=v0,
         velocity_prev=v0,
@@ -553,8 +560,6 @@ def _attempt(
     def milne(new, y, y1, y2):
         return factor * (new - ctrl.extrapolate(order, dt, dt1, dt2, y, y1, y2))
 
-    # A free gap z̄ (force control, spring, free sphere) is covered by the film's estimate:
-    # h̄ at r̄ = 0 contains it, held to rtol of the thinnest film.
     h_err = milne(h, state.film, state.film_prev, state.film_prev2)
     scale_h = tol.atol + tol.rtol * jnp.maximum(jnp.abs(h), jnp.abs(state.film))
     f_err = milne(force, state.force, state.force_prev, state.force_prev2)
@@ -586,6 +591,15 @@ def _attempt(
     check_force = (state.force != 0) & (not drive.prescribes_force)
     force_error = jnp.where(check_force, jnp.abs(f_err) / scale_f, 0.0)
     error = jnp.maximum(jnp.max(jnp.abs(h_err) / scale_h), force_error)
+    if not drive.prescribes_gap:
+        # A free gap (force control, spring, free sphere): its approach z̄_start - z̄ is what
+        # the run reports, and it is a small part of the film it sits in (under 30 mN on the
+        # paper's tribometer, 1 d_c out of 5.5): held only through h̄(0) relative to the film,
+        # it was 4× rtol of the final approach off, on steps that never saw it. So the gap is
+        # held to rtol relative to its largest excursion from the start so far.
+        z_err = milne(z_new, state.gap, state.gap_prev, state.gap_prev2)
+        excursion = jnp.maximum(state.excursion_peak, jnp.abs(z_new - state.gap_start))
+        error = jnp.maximum(error, jnp.abs(z_err) / (tol.atol + tol.rtol * excursion))
     if drive.inertia:
         # The free sphere's velocity is a state of its own ODE: control it relative to the
         # largest speed so far (it passes through zero at the turning point).
@@ -659,6 +673,9 @@ def _attempt(
         film_prev2=state.film_prev,
         gap=z_new,
         gap_prev=state.gap,
+        gap_prev2=state.gap_prev,
+        gap_start=state.gap_start,
+        excursion_peak=jnp.maximum(state.excursion_peak, jnp.abs(z_new - state.gap_start)),
         gap_step=dz,
         velocity=velocity,
         velocity_prev=state.velocity,
