@@ -360,8 +360,10 @@ def front_table(rows, panels):
             oth = [r for r in reach if not r["method"].startswith("(b")]
             bl = min(lub, key=lambda r: r["wall_s"]) if lub else None
             bo = min(oth, key=lambda r: r["wall_s"]) if oth else None
-            ahead = ("not reached" if bl is None else "yes" if bo is None
-                     or bl["wall_s"] < bo["wall_s"] else "no")
+            if bl is None:
+                ahead = "not reached" if bo is None else "no (lubjax's sweep stops short)"
+            else:
+                ahead = "yes" if bo is None or bl["wall_s"] < bo["wall_s"] else "no"
             lines.append(f"| {beta:g} | {z0:g} | {t_end:g} | {e:.0e} | "
                          f"{fmt(bl['wall_s'], '.3g') + ' (' + bl['label'] + ')' if bl else '—'} "
                          f"| {bo['method'] + ' ' + bo['label'] if bo else 'none reaches it'} | "
