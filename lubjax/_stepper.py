@@ -119,10 +119,10 @@ class Tolerance:
 
     rtol, atol: the step's estimated local error e (film h̄ at every node, and F̄) must satisfy
         |e| ≤ atol + rtol·|value|; a free gap z̄, |e| ≤ atol + rtol·max|z̄ - z̄_start|.
-        initial_step: the first step after t̄_start and after each
-        velocity jump, divided by max(1, β). order: 2 (BDF2) or 1 (backward Euler throughout).
-        max_steps: the attempt budget (accepted + rejected). force_floor: F̄ is held to rtol
-        relative to max(|F̄|, force_floor × its peak so far).
+        initial_step: the first step after t̄_start and after each velocity jump, divided by
+        max(1, β). order: 2 (BDF2) or 1 (backward Euler throughout). max_steps: the attempt
+        budget (accepted + rejected). force_floor: F̄ is held to rtol relative to max(|F̄|,
+        force_floor × its peak so far).
     """
 
     rtol: float = 1e-4
