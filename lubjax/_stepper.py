@@ -167,7 +167,6 @@ class State(NamedTuple):
     gap: jax.Array  # z̄ⁿ
     gap_prev: jax.Array
     gap_prev2: jax.Array
-    gap_start: jax.Array  # z̄ at t̄_start
     excursion_peak: jax.Array  # max |z̄ - z̄_start| so far (the approach's scale)
     gap_step: jax.Array  # Δz̄ⁿ = z̄ⁿ - z̄ⁿ⁻¹ as solved (BDF2's history; gap - gap_prev rounds it)
     velocity: jax.Array  # dz̄/dt̄ at level n by the step's BDF formula (a free sphere's state)
@@ -425,7 +424,6 @@ def _initial_state(disc, beta, drive, substrate, z0, tol: Tolerance, profile_tim
         gap=z_start,
         gap_prev=z_start,
         gap_prev2=z_start,
-        gap_start=z_start,
         excursion_peak=jnp.zeros_like(z_start),
         gap_step=jnp.zeros_like(z_start),
         velocity=v0,
@@ -591,6 +589,8 @@ def _attempt(
     check_force = (state.force != 0) & (not drive.prescribes_force)
     force_error = jnp.where(check_force, jnp.abs(f_err) / scale_f, 0.0)
     error = jnp.maximum(jnp.max(jnp.abs(h_err) / scale_h), force_error)
+    gap_start = jnp.asarray(drive.initial_gap(z0), z_new.dtype)
+    excursion = jnp.maximum(state.excursion_peak, jnp.abs(z_new - gap_start))
     if not drive.prescribes_gap:
         # A free gap (force control, spring, free sphere): its approach z̄_start - z̄ is what
         # the run reports, and it is a small part of the film it sits in (under 30 mN on the
@@ -598,7 +598,6 @@ def _attempt(
         # it was 4× rtol of the final approach off, on steps that never saw it. So the gap is
         # held to rtol relative to its largest excursion from the start so far.
         z_err = milne(z_new, state.gap, state.gap_prev, state.gap_prev2)
-        excursion = jnp.maximum(state.excursion_peak, jnp.abs(z_new - state.gap_start))
         error = jnp.maximum(error, jnp.abs(z_err) / (tol.atol + tol.rtol * excursion))
     if drive.inertia:
         # The free sphere's velocity is a state of its own ODE: control it relative to the
@@ -674,8 +673,7 @@ def _attempt(
         gap=z_new,
         gap_prev=state.gap,
         gap_prev2=state.gap_prev,
-        gap_start=state.gap_start,
-        excursion_peak=jnp.maximum(state.excursion_peak, jnp.abs(z_new - state.gap_start)),
+        excursion_peak=excursion,
         gap_step=dz,
         velocity=velocity,
         velocity_prev=state.velocity,
