@@ -58,7 +58,7 @@ def test_creep_of_a_rigid_film_follows_reynolds_and_converges():
     time error (the same mesh parameters at rtol 1e-7: 1.4e-4, 3.9e-5, 4.4e-6), fitted slope
     0.54: the gap integrates its velocity, so the local errors add up over the run. (Before the
     mobility's second stage and the free gap's own criterion: 8.5e-4, 3.2e-4, 9.2e-5, slope
-    0.48; with the second stage alone 1.42e-3, 4.3e-4, 9.6e-5. Before the far field's
+    0.48. Before the far field's
     squeeze-film weight the mesh's own error, larger at rtol 1e-3, steepened the two-point
     slope of rtol 1e-3 and 1e-4 that this test used.)"""
     load = 1e-5
