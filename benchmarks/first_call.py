@@ -1,7 +1,7 @@
 """A fresh process's first ``relax(100, 0.5, 5)`` at each git revision given, with that
 revision's defaults: what a user waits for, measured side by side in one run.
 
-    python benchmarks/first_call.py f1635a7 6c71a6e HEAD [--repeat 5] [--t-end 1e6]
+    python benchmarks/first_call.py f1635a7 6c71a6e HEAD [--repeat 5] [--t-end 1e6] [--no-estimate]
 
 Issue "Error control", item 8 asks for no slower than "today's 0.16 s run / 0.9 s compile": the
 hand-tuned grid of commit f1635a7 (before the error-controlled stepper), measured on another
@@ -12,6 +12,9 @@ round-robin). Columns: import time, ``Result.compile_s`` of the first call, the 
 wall time, the median ``run_s`` of five further calls, and the accepted steps. Writes
 benchmarks/out/first_call.md; ``--t-end`` runs ``relax(100, 0.5, t_end)`` instead (a long hold:
 the steps the neck's thinning costs) and writes benchmarks/out/first_call_t<t_end>.md.
+``--no-estimate`` passes ``Settings(error_estimate=False)`` to revisions that have that setting
+(the hand-tuned grid has no estimate to switch off): the stepper's own program against the grid's,
+without the estimate's coarse-mesh program; it writes benchmarks/out/first_call_noestimate.md.
 """
 
 from __future__ import annotations
@@ -30,12 +33,16 @@ OUT = os.path.join(ROOT, "benchmarks", "out")
 CHILD = r"""
 import json, sys, time
 t_end = float(sys.argv[1])
+no_estimate = sys.argv[2] == "1"
 start = time.perf_counter()
 import lubjax
 imported = time.perf_counter()
-first = lubjax.relax(100, 0.5, t_end)
+fields = getattr(lubjax.Settings, "__dataclass_fields__", {})
+kw = dict(settings=lubjax.Settings(error_estimate=False)) if (
+    no_estimate and "error_estimate" in fields) else {}
+first = lubjax.relax(100, 0.5, t_end, **kw)
 done = time.perf_counter()
-runs = sorted(lubjax.relax(100, 0.5, t_end).run_s for _ in range(5))
+runs = sorted(lubjax.relax(100, 0.5, t_end, **kw).run_s for _ in range(5))
 print(json.dumps(dict(import_s=imported - start, compile_s=first.compile_s,
                       first_call_s=done - imported, run_s=runs[2],
                       steps=int(getattr(first, "accepted", -1)))))
@@ -49,6 +56,8 @@ def main(argv=None):
     ap.add_argument("revisions", nargs="+")
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--t-end", type=float, default=5.0)
+    ap.add_argument("--no-estimate", action="store_true",
+                    help="Settings(error_estimate=False) where the revision has it")
     args = ap.parse_args(argv)
     results = {rev: [] for rev in args.revisions}
     with tempfile.TemporaryDirectory() as tmp:
@@ -61,7 +70,8 @@ def main(argv=None):
         try:
             for i in range(args.repeat):
                 for rev, tree in trees.items():
-                    proc = subprocess.run([sys.executable, "-c", CHILD, repr(args.t_end)], cwd=tree,
+                    proc = subprocess.run([sys.executable, "-c", CHILD, repr(args.t_end),
+                                           "1" if args.no_estimate else "0"], cwd=tree,
                                           env=dict(os.environ, PYTHONPATH=tree),
                                           capture_output=True, text=True, check=True)
                     results[rev].append(json.loads(proc.stdout.strip().splitlines()[-1]))
@@ -73,12 +83,17 @@ def main(argv=None):
     keys = ("import_s", "compile_s", "first_call_s", "run_s")
     default = args.t_end == 5.0
     command = f"python benchmarks/first_call.py {' '.join(args.revisions)} --repeat {args.repeat}"
+    if not default:
+        command += f" --t-end {args.t_end:g}"
+    if args.no_estimate:
+        command += " --no-estimate"
     lines = [
         f"# A fresh process's first relax(100, 0.5, {args.t_end:g}), by revision ({describe()})",
         "",
-        f"`{command}{'' if default else f' --t-end {args.t_end:g}'}`: "
-        "each revision's own defaults, fresh processes alternating between revisions; median "
-        "(min–max) in seconds.",
+        f"`{command}`: "
+        + ("each revision's defaults but Settings(error_estimate=False) where it exists"
+           if args.no_estimate else "each revision's own defaults")
+        + ", fresh processes alternating between revisions; median (min–max) in seconds.",
         "",
         "| revision | import | compile_s | first call | run_s (median of 5 calls) | steps |",
         "|---|---|---|---|---|---|",
@@ -87,7 +102,8 @@ def main(argv=None):
         cells = [median_range(r[k] for r in rows) for k in keys]
         cells.append(str(rows[0]["steps"]))
         lines.append(f"| {rev} | " + " | ".join(cells) + " |")
-    name = "first_call.md" if default else f"first_call_t{args.t_end:g}.md"
+    name = "first_call" + ("" if default else f"_t{args.t_end:g}")
+    name += "_noestimate.md" if args.no_estimate else ".md"
     write_report(os.path.join(OUT, name), lines)
 
 
