@@ -174,8 +174,14 @@ def _optimistix_runner(trace):
     return fit
 
 
-def optimisers(optimistix_path=None, methods=("lm", "trf", "lbfgs", "optimistix")):
+def optimisers(optimistix_path=None, methods=("lm", "trf", "lbfgs", "optimistix"), rtol=None,
+               starts=None):
+    """Each method from each start (``starts``: labels to keep; all by default), the model at
+    ``Settings(rtol=rtol)`` (the default tolerance if None; not for optimistix)."""
     import fitting
+    import lubjax
+
+    settings = None if rtol is None else lubjax.Settings(rtol=rtol)
 
     trace = fitting.read_trace(TRACE)
     sc = fitting.scales_from_trace(trace)
@@ -189,8 +195,11 @@ def optimisers(optimistix_path=None, methods=("lm", "trf", "lbfgs", "optimistix"
             runner = _optimistix_runner(trace)
             runner(base)  # compile outside the timings
         else:  # compile outside the timings
-            fitting.fit_trace(trace, method=method, max_iter=2, model_error=False)
+            fitting.fit_trace(trace, method=method, max_iter=2, model_error=False,
+                              settings=settings)
         for label, (fe, fv, fz) in STARTS:
+            if starts and label not in starts:
+                continue
             values = dict(base.values, E_star=base.values["E_star"] * fe,
                           viscosity=base.values["viscosity"] * fv, z0=base.values["z0"] * fz)
             start = fitting.Start(values, (label,))
@@ -198,7 +207,8 @@ def optimisers(optimistix_path=None, methods=("lm", "trf", "lbfgs", "optimistix"
             if method == "optimistix":
                 row = runner(start)
             else:
-                res = fitting.fit_trace(trace, method=method, starts=[start], model_error=False)
+                res = fitting.fit_trace(trace, method=method, starts=[start], model_error=False,
+                                        settings=settings)
                 row = dict(chi2=res.stats["chi2"], iterations=res.n_iterations,
                            model_runs=res.n_model_runs, wall_s=time.perf_counter() - t0,
                            converged=res.converged)
@@ -265,7 +275,8 @@ def _markdown(report):
         lines += ["", f"load average: {report['joint']['uptime']}", ""]
     if "optimisers" in report:
         o = report["optimisers"]
-        lines += ["## Optimisers on data/paper_dc140.csv (compilation excluded)", "",
+        tol = f", model at rtol {report['rtol']:g}" if report.get("rtol") else ""
+        lines += [f"## Optimisers on data/paper_dc140.csv (compilation excluded{tol})", "",
                   "| method | start | model runs | iterations | wall [s] | chi2 - best | "
                   "converged | reached optimum |", "|---|---|---|---|---|---|---|---|"]
         for r in o["rows"]:
@@ -282,6 +293,10 @@ def main(argv=None):
     p.add_argument("--batch", type=int, default=100)
     p.add_argument("--optimistix", help="folder with optimistix installed (benchmark only)")
     p.add_argument("--methods", default="lm,trf,lbfgs,optimistix")
+    p.add_argument("--rtol", type=float, help="optimisers: the model's tolerance (default: "
+                   "lubjax's); the outputs get a _rtol<value> suffix")
+    p.add_argument("--starts", help="optimisers: comma-separated start labels to run (default: "
+                   "all), e.g. 'physics start'")
     args = p.parse_args(argv)
     parts = args.only.split(",")
     # The device layout is the environment's (forced host devices need XLA_FLAGS and
@@ -297,9 +312,14 @@ def main(argv=None):
     if "joint" in parts:
         report["joint"] = joint()
     if "optimisers" in parts:
-        report["optimisers"] = optimisers(args.optimistix, args.methods.split(","))
+        report["optimisers"] = optimisers(
+            args.optimistix, args.methods.split(","), rtol=args.rtol,
+            starts=args.starts.split(",") if args.starts else None)
     os.makedirs(OUT, exist_ok=True)
     stem = os.path.join(OUT, "fit_benchmark_" + "_".join(parts))
+    if args.rtol is not None:
+        stem += f"_rtol{args.rtol:g}"
+        report["rtol"] = args.rtol
     with open(stem + ".json", "w") as fh:
         json.dump(report, fh, indent=2)
     with open(stem + ".md", "w") as fh:
