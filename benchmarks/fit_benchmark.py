@@ -177,11 +177,12 @@ def _optimistix_runner(trace):
 def optimisers(optimistix_path=None, methods=("lm", "trf", "lbfgs", "optimistix"), rtol=None,
                starts=None):
     """Each method from each start (``starts``: labels to keep; all by default), the model at
-    ``Settings(rtol=rtol)`` (the default tolerance if None; not for optimistix)."""
-    import fitting
-    import lubjax
+    ``fitting.FIT_SETTINGS`` with ``rtol`` (its own 3e-4 if None; not for optimistix)."""
+    import dataclasses
 
-    settings = None if rtol is None else lubjax.Settings(rtol=rtol)
+    import fitting
+
+    settings = None if rtol is None else dataclasses.replace(fitting.FIT_SETTINGS, rtol=rtol)
 
     trace = fitting.read_trace(TRACE)
     sc = fitting.scales_from_trace(trace)
@@ -294,7 +295,7 @@ def main(argv=None):
     p.add_argument("--optimistix", help="folder with optimistix installed (benchmark only)")
     p.add_argument("--methods", default="lm,trf,lbfgs,optimistix")
     p.add_argument("--rtol", type=float, help="optimisers: the model's tolerance (default: "
-                   "lubjax's); the outputs get a _rtol<value> suffix")
+                   "fitting.FIT_SETTINGS'); the outputs get a _rtol<value> suffix")
     p.add_argument("--starts", help="optimisers: comma-separated start labels to run (default: "
                    "all), e.g. 'physics start'")
     args = p.parse_args(argv)

@@ -42,7 +42,7 @@ from ._cache import enable_compilation_cache
 from ._compare import compare_models
 from ._fit import METHODS, FitResult, fit_traces
 from ._io import read_trace
-from ._model import DRIVES, LAYER_BASES, ModelSpec
+from ._model import DRIVES, FIT_SETTINGS, LAYER_BASES, ModelSpec
 from ._report import fit_report, result_to_dict, short_value
 
 PROG = "lubjax-fit"
@@ -214,6 +214,11 @@ def build_parser() -> Parser:
                    "white; default), white, ar1")
     p.add_argument("--no-offset", action="store_true", help="do not fit a constant offset")
     p.add_argument("--max-iter", type=positive_int, default=60, help="iteration limit (default 60)")
+    p.add_argument("--rtol", type=positive_float, default=None,
+                   help="the model's accuracy: local error tolerance of each step, and the mesh "
+                        f"(lubjax Settings.rtol, in [1e-10, 0.1]; default {FIT_SETTINGS.rtol:g}). "
+                        "Tighter is slower and smoother in the parameters, which --method "
+                        "lbfgs can need")
     p.add_argument("--no-cache", action="store_true",
                    help="do not use the persistent compilation cache (also LUBJAX_CACHE=0)")
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
@@ -244,6 +249,8 @@ def _spec_options(args, n_traces):
         if any(x in ("stiffening", "relaxation_time") for x in shared) and (
                 args.substrate != "viscoelastic"):
             raise UsageError("--shared stiffening/relaxation_time need --substrate viscoelastic")
+    if args.rtol is not None and not 1e-10 <= args.rtol <= 0.1:
+        raise UsageError(f"--rtol must be in [1e-10, 0.1], got {args.rtol:g}")
     layer = (args.thickness, args.layer_poisson, args.layer_base) if args.thickness else None
     return dict(layer=layer, viscoelastic=args.substrate == "viscoelastic",
                 fit_offset=not args.no_offset), shared
@@ -282,6 +289,8 @@ def _run(args) -> int:
         progress(f"read {len(traces)} trace(s); compiling the solver (first call only) ...")
         kw = dict(shared=shared, method=args.method, max_iter=args.max_iter, noise=args.noise,
                   progress=progress)
+        if args.rtol is not None:
+            kw["settings"] = dataclasses.replace(FIT_SETTINGS, rtol=args.rtol)
         if args.compare:
             # A layer is compared with the default it would replace (the half-space); the
             # half-space with the viscoelastic solid.

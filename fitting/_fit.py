@@ -23,9 +23,9 @@ Optimisers (``method=``):
   scan), one problem after another. Its line search needs a smoother S than LM does: S is
   smooth in θ only to the model's tolerance (the steps the controller takes change with θ), and
   from data/paper_dc140.csv's physics start the zoom line search stalls in that roughness at
-  the default rtol, χ² 5.8 above the optimum after 60 iterations (not converged); with
-  ``settings=Settings(rtol=1e-5)`` it converges in 20 (benchmarks/fit_benchmark.py --only
-  optimisers, README "Optimisers").
+  FIT_SETTINGS' rtol 3e-4, χ² 5.8 above the optimum after 60 iterations (not converged); with
+  ``settings=dataclasses.replace(FIT_SETTINGS, rtol=1e-5)`` (CLI: ``--rtol 1e-5``) it converges
+  in 20 (benchmarks/fit_benchmark.py --only optimisers, README "Optimisers").
 
 Convergence: the Gauss–Newton decrement gᵀ(JᵀJ)⁻¹g with g = Jᵀr, in units of the residual variance
 s² = 2S/(n - p), below ``tol`` (1e-4): the remaining step is under 1 % of a standard error. An
@@ -561,8 +561,8 @@ def _lbfgs(evaluate, x0s, n_samples, *, max_iter, tol, progress=None):
         at = _single(evaluate, k, x0s)
         conv, it = False, 0
         msg = (f"not converged after {max_iter} iterations (L-BFGS's line search stalls where "
-               "the error-controlled model is not smooth: a tighter Settings(rtol=...) or "
-               "method='lm')")
+               "the error-controlled model is not smooth: a tighter tolerance, settings with "
+               "rtol=1e-5 or the CLI's --rtol 1e-5, or method 'lm')")
         for it in range(1, max_iter + 1):
             with single_threaded_blas():
                 x, state, value = one(x, state)

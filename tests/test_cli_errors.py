@@ -9,6 +9,7 @@ the solver and the fit replaced by stand-ins that fail the test if they are reac
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import hashlib
 import json
@@ -395,6 +396,8 @@ FIT_USAGE = [
     (["{trace}", "{trace}"], "is given twice"),
     (["{trace}", "--max-iter", "0"], "argument --max-iter: must be an integer ≥ 1"),
     (["{trace}", "--method", "adam"], "argument --method: invalid choice"),
+    (["{trace}", "--rtol", "0.5"], "--rtol must be in [1e-10, 0.1], got 0.5"),
+    (["{trace}", "--rtol", "-1e-4"], "argument --rtol"),
     ([], "the following arguments are required: traces"),
     (["{tmp}/missing.csv"], "missing.csv: cannot read trace file"),
     (["{tmp}"], "is a folder, not a trace file"),
@@ -503,6 +506,25 @@ def test_fit_per_trace_plots_of_same_named_traces_do_not_collide(tmp_path, monke
     assert [d["trace"] for d in json.loads(out.read_text())] == traces
     assert len(table.read_text().splitlines()) == 3
     assert "wrote" in capsys.readouterr().out
+
+
+def test_fit_rtol_reaches_the_model_settings(monkeypatch, capsys):
+    """--rtol changes only the tolerance of the fits' settings (FIT_SETTINGS' force floor and
+    step budget stay); without it the fit gets no settings, i.e. FIT_SETTINGS."""
+    import fitting
+
+    seen = []
+
+    def capture(traces, **kwargs):
+        seen.append(kwargs.get("settings"))
+        return _fake_fit(traces)
+
+    monkeypatch.setattr(fcli, "fit_traces", capture)
+    assert fcli.main([SEED, "--quiet", "--rtol", "1e-5"]) == 0
+    assert fcli.main([SEED, "--quiet"]) == 0
+    tight, default = seen
+    assert tight.rtol == 1e-5 and default is None
+    assert tight == dataclasses.replace(fitting.FIT_SETTINGS, rtol=1e-5)
 
 
 def test_fit_not_converged_is_exit_1_with_outputs(tmp_path, monkeypatch, capsys):
