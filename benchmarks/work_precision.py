@@ -354,10 +354,9 @@ def front_table(rows, panels):
     lines = ["| β | z̄0 | t̄ ≤ | error ≤ | lubjax (b) run s | best other method | its run s | "
              "lubjax ahead (lubjax run s / other's) |", "|---" * 8 + "|"]
     for beta, z0, t_end in panels:
-        sel = [r for r in rows if (r["beta"], r["z0"], r["t_end"]) == (beta, z0, t_end)
-               and r["method"] != "reference" and not r["method"].startswith("(e)")]
-        ref = [r for r in rows if (r["beta"], r["z0"], r["t_end"]) == (beta, z0, t_end)
-               and r["method"] == "reference"]
+        panel = [r for r in rows if (r["beta"], r["z0"], r["t_end"]) == (beta, z0, t_end)]
+        sel = [r for r in panel if r["method"] != "reference" and not r["method"].startswith("(e)")]
+        ref = [r for r in panel if r["method"] == "reference"]
         resolution = ref[0]["error"] if ref and np.isfinite(ref[0]["error"]) else 0.0
         for e in levels:
             reach = [r for r in sel if r["ok"] and np.isfinite(r["error"]) and r["error"] <= e]

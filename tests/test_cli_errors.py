@@ -396,7 +396,7 @@ FIT_USAGE = [
     (["{trace}", "{trace}"], "is given twice"),
     (["{trace}", "--max-iter", "0"], "argument --max-iter: must be an integer ≥ 1"),
     (["{trace}", "--method", "adam"], "argument --method: invalid choice"),
-    (["{trace}", "--rtol", "0.5"], "--rtol must be in [1e-10, 0.1], got 0.5"),
+    (["{trace}", "--rtol", "0.5"], "Settings.rtol must be in [1e-10, 0.1], got 0.5"),
     (["{trace}", "--rtol", "-1e-4"], "argument --rtol"),
     ([], "the following arguments are required: traces"),
     (["{tmp}/missing.csv"], "missing.csv: cannot read trace file"),
