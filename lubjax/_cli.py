@@ -90,7 +90,8 @@ def _parser() -> Parser:
     r.add_argument(
         "--max-steps", type=int, default=None, help="attempted-step budget (Settings.max_steps)"
     )
-    r.add_argument("--order", type=int, choices=(1, 2), default=None, help="1: backward Euler")
+    r.add_argument("--order", type=int, choices=(1, 2, 3), default=None,
+                   help="1: backward Euler, 2: BDF2 (default), 3: BDF3")
     r.add_argument("--out", help="write results as JSON here")
     r.add_argument("--plot", help="write a force / film figure here (.png, .pdf, .svg, ...)")
     _add_cache_flag(r)

@@ -25,7 +25,8 @@ step's time derivative is the BDF formula a₀yⁿ⁺¹ + a₁yⁿ + a₂yⁿ⁻
   & Hinch 1986). The film force pushes the sphere away (F̄ > 0) and W̄ (its weight less
   buoyancy, or any constant load toward the substrate) pushes it in. BDF for both equations,
   v̄ⁿ⁺¹ = (a₀Δz̄ - a₂Δz̄ⁿ)/Δt̄ (Δz̄ⁿ = z̄ⁿ - z̄ⁿ⁻¹) substituted in the second, times Δt̄:
-  α = -Δt̄² G, s = a₀², b = a₀a₂Δz̄ⁿ - Δt̄ (a₁v̄ⁿ + a₂v̄ⁿ⁻¹) - Δt̄² G W̄.
+  α = -Δt̄² G, s = a₀², b = a₀a₂Δz̄ⁿ - Δt̄ (a₁v̄ⁿ + a₂v̄ⁿ⁻¹) - Δt̄² G W̄ (BDF3: one more level
+  of each history, b += a₀a₃(Δz̄ⁿ + Δz̄ⁿ⁻¹) - Δt̄ a₃v̄ⁿ⁻²).
   No cavitation: on rebound the pressure turns negative and stays in the model, as in Davis
   et al.
 
@@ -110,10 +111,11 @@ class _Drive:
         return 0.0
 
     def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
-            force):
+            force, third=None):
         """(α, s, b) of the closing row α F̄ⁿ⁺¹ + s Δz̄ = b for the step tⁿ = ``t`` → tⁿ⁺¹ =
         ``t_new``; ``gap_step`` is the last step's Δz̄ⁿ = z̄ⁿ - z̄ⁿ⁻¹ as solved (not a difference of
-        the stored gaps, which rounds it to the gap's ulp); ``force`` is F̄ⁿ."""
+        the stored gaps, which rounds it to the gap's ulp); ``force`` is F̄ⁿ. ``third`` =
+        (a₃, Δz̄ⁿ⁻¹, v̄ⁿ⁻²) where the step may be BDF3 (``Settings(order=3)``), else None."""
         raise NotImplementedError
 
 
@@ -139,7 +141,7 @@ class Travel(_Drive):
         return _monotone_approach(self.history)
 
     def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
-            force):
+            force, third=None):
         # Δz̄ = d̄(tⁿ) - d̄(tⁿ⁺¹), not (z̄0 - d̄(tⁿ⁺¹)) - z̄ⁿ: that difference of O(1) gaps rounds
         # Δz̄ to the ulp of z̄ (2.2e-16 at z̄ ~ 1), a relative error of 1 in the squeeze velocity
         # once Δz̄ is that small (a smooth start, d̄ ∝ t̄², at Δt̄ ~ 1e-11: the layer's force
@@ -171,7 +173,7 @@ class Load(_Drive):
         return self.scale * self.history.travel(t)
 
     def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
-            force):
+            force, third=None):
         return 1.0, 0.0, self.load(t_new)
 
 
@@ -192,7 +194,7 @@ class Spring(_Drive):
         return _monotone_approach(self.history)
 
     def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
-            force):
+            force, third=None):
         k = self.stiffness
         # The spring's stretch at tⁿ is F̄ⁿ/K̄ (the last row), so b = K̄(d̄ⁿ⁺¹ - d̄ⁿ) + F̄ⁿ rather
         # than K̄(d̄ⁿ⁺¹ - (z̄0 - z̄ⁿ)), whose O(1) difference rounds the stretch to the ulp of z̄
@@ -236,9 +238,13 @@ class FreeSphere(_Drive):
         return self.velocity
 
     def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
-            force):
+            force, third=None):
         g = self.inverse_mass
         b = a0 * a2 * gap_step - dt * (a1 * velocity + a2 * velocity_prev)
+        if third is not None:
+            # BDF3: v̄ⁿ⁺¹ = (a₀Δz̄ - a₂Δz̄ⁿ - a₃(Δz̄ⁿ + Δz̄ⁿ⁻¹))/Δt̄, one more velocity level
+            a3, gap_step_prev, velocity_prev2 = third
+            b = b + a0 * a3 * (gap_step + gap_step_prev) - dt * a3 * velocity_prev2
         return -(dt**2) * g, a0**2, b - dt**2 * g * self.weight
 
 

@@ -172,7 +172,8 @@ class Settings:
         r_fine: edge of the uniform fine zone (covers the Hertz radius √(1-z̄0) ≤ 1 and its rim).
         length: domain length L̄ with p̄(L̄) = 0; force truncation ≈ 4z̄/L̄² (default: from rtol).
         mesh_growth: cell-size ratio beyond r_fine (default: from rtol).
-        order: 2 (BDF2, default) or 1 (backward Euler, the paper's).
+        order: 2 (BDF2, default), 1 (backward Euler, the paper's) or 3 (BDF3: fewer steps at
+            tight tolerances; benchmarks/work_precision.py charts it).
         initial_step: first step at t̄_start and after each velocity jump, in units of
             min(1, 1/β) (the pressure's fast time scale).
         max_steps: budget of attempted steps (accepted + rejected); running out is an error.
@@ -226,8 +227,8 @@ class Settings:
                 raise ValueError(f"Settings.{name} must be a finite number > 0, got {value!r}")
         if not 1e-10 <= self.rtol <= 0.1:
             raise ValueError(f"Settings.rtol must be in [1e-10, 0.1], got {self.rtol}")
-        if self.order not in (1, 2):
-            raise ValueError(f"Settings.order must be 1 or 2, got {self.order!r}")
+        if self.order not in (1, 2, 3):
+            raise ValueError(f"Settings.order must be 1, 2 or 3, got {self.order!r}")
         if not (isinstance(self.max_steps, int) and self.max_steps >= 10):
             raise ValueError(f"Settings.max_steps must be an integer >= 10, got {self.max_steps!r}")
         for name in ("dr", "length", "mesh_growth"):

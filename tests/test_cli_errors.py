@@ -137,7 +137,7 @@ RELAX_USAGE = [
     (["relax", "--beta", "100"], "give --beta and --z0, or the SI parameters"),
     (DIM + ["--beta", "1e300"], "beta must be finite and in ["),
     (DIM + ["--beta", "1e300", "--out", "{tmp}/new/r.json"], "beta must be finite and in ["),
-    (DIM + ["--order", "3"], "argument --order: invalid choice"),
+    (DIM + ["--order", "4"], "argument --order: invalid choice"),
     (["relax", "--beta", "x", "--z0", "1"], "argument --beta: invalid float value: 'x'"),
     (["frobnicate"], "invalid choice: 'frobnicate'"),
     ([], "the following arguments are required: COMMAND"),
