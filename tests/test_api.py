@@ -96,7 +96,7 @@ def test_bad_times_and_settings_are_clear_errors():
             lubjax.relax(100.0, 0.5, **{"t_end": 5.0, **kwargs})
     assert lubjax.relax(100.0, 0.5, t_end=np.array(0.2)).t[-1] == 0.2
     for kwargs, match in [(dict(rtol=0.0), "rtol"), (dict(rtol=0.5), "rtol"),
-                          (dict(order=3), "order"), (dict(max_steps=2.5), "max_steps"),
+                          (dict(order=4), "order"), (dict(max_steps=2.5), "max_steps"),
                           (dict(dr=-1.0), "dr"), (dict(contact_radius=2.0), "contact_radius"),
                           (dict(contact_radius="yes"), "contact_radius")]:
         with pytest.raises(ValueError, match=match):

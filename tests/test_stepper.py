@@ -158,13 +158,15 @@ def test_nan_parameters_stop_the_run_with_a_status():
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("order", [2, 3])
 @pytest.mark.parametrize("beta, z0", [(0.1, 0.05), (0.1, 5.0), (1e6, 0.05), (1e6, 5.0)])
-def test_corners_of_the_parameter_box_to_a_million(beta, z0):
+def test_corners_of_the_parameter_box_to_a_million(beta, z0, order):
     """β ∈ [10⁻¹, 10⁶] × z̄0 ∈ [0.05, 5] held to t̄ = 10⁶: finite, positive film, non-negative
-    force, and the right end state (Hertz for z̄0 < 1, no force for z̄0 > 1)."""
+    force, and the right end state (Hertz for z̄0 < 1, no force for z̄0 > 1); BDF2 and BDF3."""
     # Default tolerance (at rtol = 1e-3 the coarser mesh's neck at β = 10⁶, z̄0 = 0.05 keeps
     # failing positivity and the run needs > 20000 attempts: known weakness, see README).
-    res = lubjax.relax(beta, z0, 1e6, settings=lubjax.Settings(error_estimate=False))
+    settings = lubjax.Settings(error_estimate=False, order=order)
+    res = lubjax.relax(beta, z0, 1e6, settings=settings)
     assert res.ok and res.accepted < 5000
     peak = res.force.max()
     assert res.force.min() >= 0.0
