@@ -294,10 +294,16 @@ def face_conductance(disc: Discretisation, h, h_mid):
 def face_conductance_extrapolated(disc: Discretisation, film, film_prev, gap, gap_prev, omega):
     """:func:`face_conductance` of the film extrapolated to the new level (eq 19 lags it; BDF2
     extrapolates it geometrically, :func:`_extrapolate_film`)."""
-    h = _extrapolate_film(film, film_prev, omega)
-    h_mid = _extrapolate_film(
-        _film_at_midpoints(disc, film, gap), _film_at_midpoints(disc, film_prev, gap_prev), omega
+    return _conductance_of_extrapolated(
+        disc, lambda h, h1: _extrapolate_film(h, h1, omega), ((film, gap), (film_prev, gap_prev))
     )
+
+
+def _conductance_of_extrapolated(disc: Discretisation, extrapolate, levels):
+    """:func:`face_conductance` of ``extrapolate`` applied to the nodal films and, alike, to the
+    midpoint films of ``levels`` ((film, gap) pairs, newest first)."""
+    h = extrapolate(*(film for film, _ in levels))
+    h_mid = extrapolate(*(_film_at_midpoints(disc, film, gap) for film, gap in levels))
     return face_conductance(disc, h, h_mid)
 
 
@@ -410,14 +416,9 @@ def _conductance_quadratic(disc: Discretisation, state: State, dt, dt1, dt2):
         out = jnp.exp(ctrl.lagrange(dt, (0.0, dt1, dt1 + dt2), logs))
         return jnp.where(positive, out, h)
 
-    mid = [
-        _film_at_midpoints(disc, f, z)
-        for f, z in ((state.film, state.gap), (state.film_prev, state.gap_prev),
-                     (state.film_prev2, state.gap_prev2))
-    ]
-    return face_conductance(
-        disc, extrapolate(state.film, state.film_prev, state.film_prev2), extrapolate(*mid)
-    )
+    levels = ((state.film, state.gap), (state.film_prev, state.gap_prev),
+              (state.film_prev2, state.gap_prev2))
+    return _conductance_of_extrapolated(disc, extrapolate, levels)
 
 
 def _next_breakpoint(breakpoints, t, t_end):
@@ -556,11 +557,12 @@ def _attempt(
     step_before = state.gap_step
     # Σ_j a_j z̄ⁿ⁺¹⁻ʲ = a₀Δz̄ + gap_history, in the solved steps (linear_step): -a₂Δz̄ⁿ for BDF2
     gap_history = -a2 * step_before
-    # BDF3 (Settings(order=3), static: the programs of orders 1 and 2 carry none of this): from
-    # the fourth step of a segment on, the variable-step BDF3 formula, with the conductances of
-    # the film extrapolated quadratically in ln h̄ (third-order, positive) and every history sum
-    # one level longer. None where the step cannot be BDF3.
-    third = None
+    # BDF3 (Settings(order=3); static: the programs of orders 1 and 2 compute none of this, only
+    # carry the state's extra levels): from the fourth step of a segment on, the variable-step
+    # BDF3 formula, with the conductances of the film extrapolated quadratically in ln h̄
+    # (third-order, positive) and every history sum one level longer. a₃ is None where the
+    # step cannot be BDF3.
+    a3 = None
     if tol.order == 3:
         order = jnp.where((state.since_restart >= 3) & (order == 2), 3, order)
         is3 = order == 3
@@ -572,12 +574,10 @@ def _attempt(
         )
         # Σ_j a_j z̄ⁿ⁺¹⁻ʲ = a₀Δz̄ - a₂Δz̄ⁿ - a₃(Δz̄ⁿ + Δz̄ⁿ⁻¹)  (Σ a_j = 0)
         gap_history = -a2 * step_before - a3 * (step_before + state.gap_step_prev)
-        third = (a3, state.dt_prev3)
     row = drive.row(
         t, t_new, z0, dt, a0, a1, a2, state.gap, step_before, state.velocity, state.velocity_prev,
         state.force,
-        **({} if third is None else {"third": (third[0], state.gap_step_prev,
-                                               state.velocity_prev2)}),
+        third=None if a3 is None else (a3, state.gap_step_prev, state.velocity_prev2),
     )
     # The substrate's memory (module _substrate): ūⁿ⁺¹ = c p̄ⁿ⁺¹ + Σ_k memory_k; none if elastic.
     j0, jk, lam = substrate.compliance()
@@ -586,8 +586,8 @@ def _attempt(
         # adding zero memory terms changed the rounding, and the fits' convergence with it).
         compliance = None
         known_load = a1 * state.elastic_load + a2 * state.elastic_load_prev
-        if third is not None:
-            known_load = known_load + third[0] * state.elastic_load_prev2
+        if a3 is not None:
+            known_load = known_load + a3 * state.elastic_load_prev2
 
         def loads(p):
             return state.memory, p
@@ -596,16 +596,16 @@ def _attempt(
         creep = dt * jk / lam / denom
         compliance = j0 + jnp.sum(creep)
         history_memory = -a1 * state.memory - a2 * state.memory_prev
-        if third is not None:
-            history_memory = history_memory - third[0] * state.memory_prev2
+        if a3 is not None:
+            history_memory = history_memory - a3 * state.memory_prev2
         memory_known = history_memory / denom[:, None]
         known_load = (
             a0 * jnp.sum(memory_known, axis=0)
             + a1 * state.elastic_load
             + a2 * state.elastic_load_prev
         )
-        if third is not None:
-            known_load = known_load + third[0] * state.elastic_load_prev2
+        if a3 is not None:
+            known_load = known_load + a3 * state.elastic_load_prev2
 
         def loads(p):
             memory = memory_known + creep[:, None] * p[None, :]
@@ -639,11 +639,11 @@ def _attempt(
     # sphere's position and velocity where the drive leaves them free.
     dt3 = state.dt_prev3
     factor = ctrl.milne_factor(
-        order, dt, dt1, dt2, a0, a1, a2, None if third is None else (dt3, third[0])
+        order, dt, dt1, dt2, a0, a1, a2, None if a3 is None else (dt3, a3)
     )
 
     def milne(new, y, y1, y2, y3):
-        level3 = None if third is None else (dt3, y3)
+        level3 = None if a3 is None else (dt3, y3)
         return factor * (new - ctrl.extrapolate(order, dt, dt1, dt2, y, y1, y2, level3))
 
     h_err = milne(h, state.film, state.film_prev, state.film_prev2, state.film_prev3)
