@@ -28,7 +28,8 @@ Departures from the paper, and why:
   the default), the same one factorisation and two triangular solves per attempt, with the
   mobility film extrapolated quadratically in ln h̄ (third-order, positive) and Milne's
   estimate paired with the cubic predictor. At tight tolerances it needs half to two thirds of
-  BDF2's steps for a smaller error, for every drive and substrate (tests/test_stepper.py;
+  BDF2's steps, for every drive and substrate; its error is smaller where the time error
+  dominates, the mesh's where that dominates (tests/test_stepper.py;
   benchmarks/work_precision.py charts it).
 * Mobility corrected in a second stage on the same LU factors (like a two-stage Rosenbrock-W
   step: one factorisation, two triangular solves): with the film h̄ⁿ⁺¹ of the first stage, one
