@@ -166,6 +166,7 @@ class State(NamedTuple):
     dt_prev3: jax.Array  # t_{n-2} - t_{n-3} (BDF3)
     pressure: jax.Array  # p̄ⁿ (N,)
     pressure_prev: jax.Array  # p̄ⁿ⁻¹ (N,)
+    pressure_prev2: jax.Array  # p̄ⁿ⁻² (N,): BDF3's interpolant
     elastic_load: jax.Array  # ūⁿ: w̄ = -Ŵū (= p̄ on an elastic substrate; _substrate)
     elastic_load_prev: jax.Array
     elastic_load_prev2: jax.Array  # (BDF3)
@@ -202,6 +203,7 @@ class State(NamedTuple):
     status: jax.Array  # RUNNING, DONE, STEP_TOO_SMALL
     entry: jax.Array  # index of the output entry of level n, and of n-1
     entry_prev: jax.Array
+    entry_prev2: jax.Array
     profiles: jax.Array  # p̄ at the requested profile times (P, N)
     profile_gaps: jax.Array  # z̄ at the requested profile times (P,)
     profile_films: jax.Array  # h̄ at the requested profile times (P, N)
@@ -221,8 +223,8 @@ class Step(NamedTuple):
     elastic_energy: jax.Array  # Ū = π Σ A_i p̄_i (Ŵp̄)_i = ½ ∫ p̄ (-w̄) dĀ, units F_s d_c
     dissipation: jax.Array  # viscous power D̄ = 2π Σ_faces g (Δp̄)², same units per t_c
     accepted: jax.Array  # this entry is a new accepted level
-    stencil: jax.Array  # entries of levels n-1 and n (for the interpolant), (2,)
-    linear: jax.Array  # interpolate linearly (a backward-Euler step)
+    stencil: jax.Array  # entries of levels n-2, n-1 and n (for the interpolant), (3,)
+    degree: jax.Array  # of the step's interpolant: 1 (backward Euler), 2 (BDF2), 3 (BDF3)
 
 
 class Trajectory(NamedTuple):
@@ -428,19 +430,33 @@ def _next_breakpoint(breakpoints, t, t_end):
     return jnp.minimum(jnp.min(later, initial=jnp.inf), t_end)
 
 
-def _interpolate(t_query, t0, t1, t2, y0, y1, y2, linear, xp=jnp):
-    """The step's interpolant through (t0, y0), (t1, y1), (t2, y2) at t_query ∈ [t1, t2]:
-    quadratic (BDF2's own dense output), or linear through the last two for a BE step.
-    ``xp``: jax.numpy, or numpy for results already on the host (:func:`evaluate_host`)."""
+def _interpolate(t_query, times, values, degree, xp=jnp):
+    """The step's interpolant at t_query ∈ [t1, t2], ``times`` = (t₋₁, t0, t1, t2) and
+    ``values`` alike, newest last: of the step's order (its own dense output), linear through the
+    last two for a backward-Euler step (degree 1), quadratic through the last three for BDF2 (2),
+    cubic through all four for BDF3 (3). ``xp``: jax.numpy, or numpy for results already on the
+    host (:func:`evaluate_host`)."""
+    tm, t0, t1, t2 = times
+    ym, y0, y1, y2 = values
     lin = y1 + (t_query - t1) / (t2 - t1) * (y2 - y1)
-    # Where linear, t0 may coincide with t1: move it so no branch divides by zero (a NaN in the
-    # unselected branch would still poison reverse-mode gradients).
-    t0 = xp.where(linear, 2.0 * t1 - t2, t0)
+    # Levels a lower degree does not use may coincide with t1 (a segment's first steps): move
+    # them so no branch divides by zero (a NaN in an unselected branch would still poison
+    # reverse-mode gradients).
+    t0 = xp.where(degree == 1, 2.0 * t1 - t2, t0)
+    tm = xp.where(degree < 3, 2.0 * t0 - t1, tm)
     l0 = (t_query - t1) * (t_query - t2) / ((t0 - t1) * (t0 - t2))
     l1 = (t_query - t0) * (t_query - t2) / ((t1 - t0) * (t1 - t2))
     l2 = (t_query - t0) * (t_query - t1) / ((t2 - t0) * (t2 - t1))
     quad = l0 * y0 + l1 * y1 + l2 * y2
-    return xp.where(linear, lin, quad)
+    # The cubic as the quadratic plus the Newton term through the fourth level: BDF2 steps keep
+    # the quadratic's arithmetic exactly.
+    omega = (t_query - t0) * (t_query - t1) * (t_query - t2)
+    cubic = quad + omega * (ym - (
+        (tm - t1) * (tm - t2) / ((t0 - t1) * (t0 - t2)) * y0
+        + (tm - t0) * (tm - t2) / ((t1 - t0) * (t1 - t2)) * y1
+        + (tm - t0) * (tm - t1) / ((t2 - t0) * (t2 - t1)) * y2
+    )) / ((tm - t0) * (tm - t1) * (tm - t2))
+    return xp.where(degree == 1, lin, xp.where(degree == 2, quad, cubic))
 
 
 def _restart_step(tol: Tolerance, beta):
@@ -465,6 +481,7 @@ def _initial_state(disc, beta, drive, substrate, z0, tol: Tolerance, profile_tim
         dt_prev3=scalar(1.0),
         pressure=zero,
         pressure_prev=zero,
+        pressure_prev2=zero,
         elastic_load=zero,
         elastic_load_prev=zero,
         elastic_load_prev2=zero,
@@ -501,6 +518,7 @@ def _initial_state(disc, beta, drive, substrate, z0, tol: Tolerance, profile_tim
         status=integer(RUNNING),
         entry=integer(0),
         entry_prev=integer(0),
+        entry_prev2=integer(0),
         profiles=jnp.zeros((profile_times.shape[0], disc.r.shape[0]), dtype),
         # (the initial state answers profile times at t̄_start)
         profile_gaps=jnp.full((profile_times.shape[0],), z_start, dtype),
@@ -508,7 +526,7 @@ def _initial_state(disc, beta, drive, substrate, z0, tol: Tolerance, profile_tim
     )
 
 
-def _entry_of(disc, state: State, outflow, dissipation, accepted, linear, stencil) -> Step:
+def _entry_of(disc, state: State, outflow, dissipation, accepted, degree, stencil) -> Step:
     elastic = state.film - state.gap - 0.5 * disc.r**2  # Ŵū = -w̄
     return Step(
         t=state.t,
@@ -522,7 +540,7 @@ def _entry_of(disc, state: State, outflow, dissipation, accepted, linear, stenci
         dissipation=dissipation,
         accepted=accepted,
         stencil=stencil,
-        linear=linear,
+        degree=degree,
     )
 
 
@@ -730,22 +748,25 @@ def _attempt(
     too_small = ~accept & (dt_next < floor)
 
     # Profiles requested in (t_n, t_{n+1}]: the step's interpolant of p̄ and z̄.
-    linear = order == 1
+    degree = jnp.asarray(order, jnp.int32)
     in_step = accept & (profile_times > t) & (profile_times <= t_new)
+    times = (t - dt1 - dt2, t - dt1, t, t_new)
 
-    def interpolant(y_prev, y, y_new):
-        return jax.vmap(
-            lambda tq: _interpolate(tq, t - dt1, t, t_new, y_prev, y, y_new, linear)
-        )(profile_times)
+    def interpolant(*values):
+        return jax.vmap(lambda tq: _interpolate(tq, times, values, degree))(profile_times)
 
     profiles = jnp.where(
-        in_step[:, None], interpolant(state.pressure_prev, state.pressure, p), state.profiles
+        in_step[:, None],
+        interpolant(state.pressure_prev2, state.pressure_prev, state.pressure, p),
+        state.profiles,
     )
     profile_gaps = jnp.where(
-        in_step, interpolant(state.gap_prev, state.gap, z_new), state.profile_gaps
+        in_step, interpolant(state.gap_prev2, state.gap_prev, state.gap, z_new),
+        state.profile_gaps,
     )
     profile_films = jnp.where(
-        in_step[:, None], interpolant(state.film_prev, state.film, h), state.profile_films
+        in_step[:, None], interpolant(state.film_prev2, state.film_prev, state.film, h),
+        state.profile_films,
     )
 
     entry = k + 1
@@ -756,6 +777,7 @@ def _attempt(
         dt_prev3=dt2,
         pressure=p,
         pressure_prev=state.pressure,
+        pressure_prev2=state.pressure_prev,
         elastic_load=load,
         elastic_load_prev=state.elastic_load,
         elastic_load_prev2=state.elastic_load_prev,
@@ -792,6 +814,7 @@ def _attempt(
         status=jnp.where(t_new >= t_end, DONE, RUNNING),
         entry=jnp.asarray(entry, jnp.int32),
         entry_prev=state.entry,
+        entry_prev2=state.entry_prev,
         profiles=profiles,
         profile_gaps=profile_gaps,
         profile_films=profile_films,
@@ -803,14 +826,15 @@ def _attempt(
         status=jnp.where(too_small, STEP_TOO_SMALL, state.status),
     )
     out_state = jax.tree_util.tree_map(lambda a, b: jnp.where(accept, a, b), new, kept)
-    stencil = jnp.stack([state.entry_prev, state.entry])
+    stencil = jnp.stack([state.entry_prev2, state.entry_prev, state.entry])
     out = _entry_of(
         disc,
         out_state,
         jnp.where(accept, outflow, 0.0),
         jnp.where(accept, dissipation, 0.0),
         accept,
-        linear & accept,
+        # (a rejected entry repeats the accepted level before it; never read past that level)
+        jnp.where(accept, degree, 2),
         stencil,
     )
     return out_state, out
@@ -818,10 +842,11 @@ def _attempt(
 
 def _idle(disc, state: State, k):
     """An attempt after the run ended: nothing changes."""
-    stencil = jnp.stack([state.entry_prev, state.entry])
-    no = jnp.asarray(False)
+    stencil = jnp.stack([state.entry_prev2, state.entry_prev, state.entry])
     zero = jnp.zeros_like(state.t)
-    return state, _entry_of(disc, state, zero, zero, no, no, stencil)
+    return state, _entry_of(
+        disc, state, zero, zero, jnp.asarray(False), jnp.asarray(2, jnp.int32), stencil
+    )
 
 
 def rollout(
@@ -864,7 +889,8 @@ def rollout(
     state0 = _initial_state(disc, beta, drive, substrate, z0, tol, profile_times)
     zero = jnp.zeros((), dtype)
     first = _entry_of(
-        disc, state0, zero, zero, jnp.asarray(True), jnp.asarray(False), jnp.zeros(2, jnp.int32)
+        disc, state0, zero, zero, jnp.asarray(True), jnp.asarray(2, jnp.int32),
+        jnp.zeros(3, jnp.int32),
     )
     attempt = functools.partial(
         _attempt, disc, beta, z0, drive, substrate, t_end, tol, profile_times
@@ -913,9 +939,10 @@ def rollout(
 
 
 def evaluate(steps: Step, times, field: str = "force"):
-    """``field`` of the run at ``times`` by the stepper's own interpolant (quadratic for BDF2
-    steps, linear for backward-Euler ones). Times past the end of the run give NaN; before the
-    start, the initial value. Differentiable, vmappable; independent of which times are asked.
+    """``field`` of the run at ``times`` by the stepper's own interpolant (of each step's order:
+    cubic for BDF3 steps, quadratic for BDF2, linear for backward Euler). Times past the end of
+    the run give NaN; before the start, the initial value. Differentiable, vmappable;
+    independent of which times are asked.
     """
     return _evaluate(jnp, steps, times, field)
 
@@ -932,12 +959,13 @@ def _evaluate(xp, steps: Step, times, field):
     values = getattr(steps, field)
     times = xp.asarray(times, values.dtype)
     k = xp.clip(xp.searchsorted(steps.t, times, side="left"), 0, steps.t.shape[0] - 1)
-    i0, i1 = steps.stencil[k, 0], steps.stencil[k, 1]
-    t0, t1, t2 = steps.t[i0], steps.t[i1], steps.t[k]
-    y0, y1, y2 = values[i0], values[i1], values[k]
-    linear = steps.linear[k] | (i0 == i1)
+    im, i0, i1 = steps.stencil[k, 0], steps.stencil[k, 1], steps.stencil[k, 2]
+    degree = xp.where(i0 == i1, 1, steps.degree[k])
     with np.errstate(invalid="ignore", divide="ignore"):  # NumPy: the unselected branch
-        at = _interpolate(times, t0, t1, t2, y0, y1, y2, linear, xp)
+        at = _interpolate(
+            times, (steps.t[im], steps.t[i0], steps.t[i1], steps.t[k]),
+            (values[im], values[i0], values[i1], values[k]), degree, xp,
+        )
     at = xp.where(k == 0, values[0], at)
     # An unfinished scan run repeats its last level: nothing is known past it.
     return xp.where(times > steps.t[-1], xp.nan, at)

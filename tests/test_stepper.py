@@ -55,8 +55,9 @@ def test_gradient_against_central_differences():
         assert np.max(np.abs(J[:, k] - fd)) < 1e-4 * np.max(np.abs(fd)), k
 
 
-def test_results_do_not_depend_on_requested_times():
-    s = lubjax.Settings(**COARSE)
+@pytest.mark.parametrize("order", [2, 3])
+def test_results_do_not_depend_on_requested_times(order):
+    s = lubjax.Settings(**COARSE, order=order)
     a = lubjax.relax(100.0, 0.7, 3.0, settings=s)
     b = lubjax.relax(100.0, 0.7, 3.0, settings=s, profile_times=[0.123, 1.0, 2.71])
     np.testing.assert_array_equal(a.t, b.t)
@@ -100,6 +101,33 @@ def test_time_error_converges_at_the_observed_order_in_rtol():
         errs = [np.max(np.abs(force(r, order) - refs[order])) for r in rtols]
         slope = np.polyfit(np.log(rtols), np.log(errs), 1)[0]
         assert abs(slope - expected) < 0.15, (order, slope, errs)
+
+
+@pytest.mark.parametrize("degree", [1, 2, 3])
+def test_interpolant_reproduces_polynomials_of_its_degree(degree):
+    """The dense output of a step of order p (backward Euler, BDF2, BDF3) is the polynomial of
+    degree p through the step's levels: exact for polynomials of that degree, not of the next."""
+    from lubjax._stepper import _interpolate
+
+    times = (0.1, 0.35, 0.5, 0.9)
+    query = np.linspace(0.5, 0.9, 7)
+    for power, exact in [(degree, True), (degree + 1, False)]:
+        values = tuple(t**power for t in times)
+        got = np.asarray(_interpolate(query, times, values, degree, np))
+        assert np.allclose(got, query**power, rtol=1e-13, atol=1e-15) == exact, (power, got)
+
+
+def test_bdf3_output_between_steps_is_as_accurate_as_at_them():
+    """BDF3 steps are read by a cubic through four levels (its own dense output): between the
+    steps the force is as accurate as at them. Measured, rtol 1e-6: midpoints 1.005× the error
+    at the levels; BDF2's quadratic read of the same steps gave 1.46×."""
+    settings = dict(COARSE, order=3, max_steps=200_000)
+    ref = lubjax.relax(30.0, 0.8, 3.0, settings=lubjax.Settings(rtol=1e-10, **settings))
+    run = lubjax.relax(30.0, 0.8, 3.0, settings=lubjax.Settings(rtol=1e-6, **settings))
+    levels = run.t[run.t > 0.05]
+    mid = 0.5 * (levels[1:] + levels[:-1])
+    at_levels, between = (np.max(np.abs(run.at(t) - ref.at(t))) for t in (levels, mid))
+    assert between < 1.1 * at_levels, (between, at_levels)
 
 
 BDF3_SCENES = {
