@@ -219,6 +219,9 @@ def build_parser() -> Parser:
                         f"(lubjax Settings.rtol; default {FIT_SETTINGS.rtol:g}). "
                         "Tighter is slower and smoother in the parameters, which --method "
                         "lbfgs can need")
+    p.add_argument("--order", type=int, choices=(1, 2, 3), default=None,
+                   help="the model's time integrator: 2 (BDF2, default), 3 (BDF3: fewer steps "
+                        "at tight --rtol) or 1 (backward Euler) (lubjax Settings.order)")
     p.add_argument("--no-cache", action="store_true",
                    help="do not use the persistent compilation cache (also LUBJAX_CACHE=0)")
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
@@ -258,7 +261,8 @@ def _run(args) -> int:
     check_distinct_inputs(args.traces, "trace")
     spec_kw, shared = _spec_options(args, len(args.traces))
     # Settings checks the range itself (a ValueError: one line, exit 2, before any fitting)
-    settings = None if args.rtol is None else dataclasses.replace(FIT_SETTINGS, rtol=args.rtol)
+    accuracy = {k: v for k, v in (("rtol", args.rtol), ("order", args.order)) if v is not None}
+    settings = dataclasses.replace(FIT_SETTINGS, **accuracy) if accuracy else None
     plots = []
     if args.plot is not None:
         if not args.plot.strip():

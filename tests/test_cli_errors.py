@@ -398,6 +398,7 @@ FIT_USAGE = [
     (["{trace}", "--method", "adam"], "argument --method: invalid choice"),
     (["{trace}", "--rtol", "0.5"], "Settings.rtol must be in [1e-10, 0.1], got 0.5"),
     (["{trace}", "--rtol", "-1e-4"], "argument --rtol"),
+    (["{trace}", "--order", "4"], "argument --order: invalid choice"),
     ([], "the following arguments are required: traces"),
     (["{tmp}/missing.csv"], "missing.csv: cannot read trace file"),
     (["{tmp}"], "is a folder, not a trace file"),
@@ -508,9 +509,10 @@ def test_fit_per_trace_plots_of_same_named_traces_do_not_collide(tmp_path, monke
     assert "wrote" in capsys.readouterr().out
 
 
-def test_fit_rtol_reaches_the_model_settings(monkeypatch, capsys):
-    """--rtol changes only the tolerance of the fits' settings (FIT_SETTINGS' force floor and
-    step budget stay); without it the fit gets no settings, i.e. FIT_SETTINGS."""
+def test_fit_rtol_and_order_reach_the_model_settings(monkeypatch, capsys):
+    """--rtol and --order change only the tolerance and the integrator of the fits' settings
+    (FIT_SETTINGS' force floor and step budget stay); without them the fit gets no settings,
+    i.e. FIT_SETTINGS."""
     import fitting
 
     seen = []
@@ -522,9 +524,11 @@ def test_fit_rtol_reaches_the_model_settings(monkeypatch, capsys):
     monkeypatch.setattr(fcli, "fit_traces", capture)
     assert fcli.main([SEED, "--quiet", "--rtol", "1e-5"]) == 0
     assert fcli.main([SEED, "--quiet"]) == 0
-    tight, default = seen
+    assert fcli.main([SEED, "--quiet", "--order", "3"]) == 0
+    tight, default, bdf3 = seen
     assert tight.rtol == 1e-5 and default is None
     assert tight == dataclasses.replace(fitting.FIT_SETTINGS, rtol=1e-5)
+    assert bdf3 == dataclasses.replace(fitting.FIT_SETTINGS, order=3)
 
 
 def test_fit_not_converged_is_exit_1_with_outputs(tmp_path, monkeypatch, capsys):
