@@ -4,6 +4,7 @@ L̄; ``lubjax._solve._mesh_from_tolerance``) of another tolerance, ``rtol × coa
 1: a finer mesh), so the steps stay (nearly) the same and only the mesh changes.
 
     python benchmarks/mesh_balance.py [--coarsening 0.1 0.3 1 3 10] [--rtols 1e-3 1e-4 1e-5]
+                                      [--order 3]
 
 If the error hardly moves with the mesh, the time error dominates and the mesh rule
 over-resolves that scene (cost per attempt ∝ N^2.4, one dense LU); if it follows the mesh, the
@@ -11,7 +12,7 @@ spatial error dominates. Error as in benchmarks/work_precision.py (max |F̄ - F�
 its output times, against its cached rtol-1e-8 reference; pointwise where F̄_ref > 1e-3 of its
 peak). Run time: the faster of two calls, compilation excluded, single thread. The contact
 refinements (rim, dimple) stay those of ``rtol``. About 6 minutes on 2 cores. Writes
-benchmarks/out/mesh_balance.md.
+benchmarks/out/mesh_balance.md (mesh_balance_order3.md with ``--order 3``: BDF3's steps).
 """
 
 from __future__ import annotations
@@ -39,6 +40,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--coarsening", type=float, nargs="+", default=[0.1, 0.3, 1.0, 3.0, 10.0])
     ap.add_argument("--rtols", type=float, nargs="+", default=[1e-3, 1e-4, 1e-5])
+    ap.add_argument("--order", type=int, choices=(1, 2, 3), default=2,
+                    help="time integrator (Settings.order; default 2, BDF2)")
     args = ap.parse_args(argv)
     start = time.perf_counter()
     times = wp.all_output_times()
@@ -51,7 +54,8 @@ def main(argv=None):
                 for coarsening in args.coarsening:
                     dr, growth, length = _mesh_from_tolerance(rtol * coarsening)
                     settings = lubjax.Settings(rtol=rtol, dr=dr, mesh_growth=growth,
-                                               length=length, error_estimate=False)
+                                               length=length, error_estimate=False,
+                                               order=args.order)
                     res = lubjax.relax(beta, z0, t_end, settings=settings)
                     run_s = min(res.run_s, lubjax.relax(beta, z0, t_end, settings=settings).run_s)
                     err, point = wp.errors(res.at(times[keep]), refs[(beta, z0)][keep])
@@ -63,7 +67,8 @@ def main(argv=None):
     mach = machine.describe()
     command = ("python benchmarks/mesh_balance.py --coarsening "
                + " ".join(f"{c:g}" for c in args.coarsening)
-               + " --rtols " + " ".join(f"{r:g}" for r in args.rtols))
+               + " --rtols " + " ".join(f"{r:g}" for r in args.rtols)
+               + (f" --order {args.order}" if args.order != 2 else ""))
     lines = [
         f"# Mesh against time steps at one tolerance ({machine.label(mach)})",
         "",
@@ -77,7 +82,8 @@ def main(argv=None):
     for t_end, beta, z0, rtol, c, err, point, attempts, nodes, run_s in rows:
         lines.append(f"| {t_end:g} | {beta:g} | {z0:g} | {rtol:g} | {rtol * c:g} | {err:.2e} | "
                      f"{point:.2e} | {attempts} | {nodes} | {run_s:.3f} |")
-    machine.write_report(Path(__file__).resolve().parent / "out" / "mesh_balance.md", lines)
+    name = "mesh_balance.md" if args.order == 2 else f"mesh_balance_order{args.order}.md"
+    machine.write_report(Path(__file__).resolve().parent / "out" / name, lines)
 
 
 if __name__ == "__main__":

@@ -201,7 +201,7 @@ class State(NamedTuple):
     accepted: jax.Array  # counters
     rejected: jax.Array
     status: jax.Array  # RUNNING, DONE, STEP_TOO_SMALL
-    entry: jax.Array  # index of the output entry of level n, and of n-1
+    entry: jax.Array  # index of the output entry of level n (entry_prev: n-1, entry_prev2: n-2)
     entry_prev: jax.Array
     entry_prev2: jax.Array
     profiles: jax.Array  # p̄ at the requested profile times (P, N)
