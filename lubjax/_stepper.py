@@ -448,14 +448,7 @@ def _interpolate(t_query, times, values, degree, xp=jnp):
     l1 = (t_query - t0) * (t_query - t2) / ((t1 - t0) * (t1 - t2))
     l2 = (t_query - t0) * (t_query - t1) / ((t2 - t0) * (t2 - t1))
     quad = l0 * y0 + l1 * y1 + l2 * y2
-    # The cubic as the quadratic plus the Newton term through the fourth level: BDF2 steps keep
-    # the quadratic's arithmetic exactly.
-    omega = (t_query - t0) * (t_query - t1) * (t_query - t2)
-    cubic = quad + omega * (ym - (
-        (tm - t1) * (tm - t2) / ((t0 - t1) * (t0 - t2)) * y0
-        + (tm - t0) * (tm - t2) / ((t1 - t0) * (t1 - t2)) * y1
-        + (tm - t0) * (tm - t1) / ((t2 - t0) * (t2 - t1)) * y2
-    )) / ((tm - t0) * (tm - t1) * (tm - t2))
+    cubic = ctrl.lagrange(t_query - t2, (t2 - tm, t2 - t0, t2 - t1, 0.0), (ym, y0, y1, y2))
     return xp.where(degree == 1, lin, xp.where(degree == 2, quad, cubic))
 
 
