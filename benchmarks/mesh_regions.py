@@ -9,11 +9,13 @@ nothing is over-resolved for that scene (its nodes cost LU work, ∝ N³, for no
 inside the contact, around its edge (r̄ = √(1 - z̄0) ≈ 0.71 for z̄0 = 0.5 at the end of the
 ramp), the rest of the uniform fine zone (r̄ ≤ 1.6), the start of the growing cells, and the
 far field. "base" is the mesh as it is; "coarsen" rows drop every other node of a band instead.
+``--trade`` runs, instead of the bands, base and meshes that move nodes from the fine zone to the
+first growing cells: Δr̄ of the fine zone × 1.15 or × 1.4, with the cells of [1.6, 10] split.
 Error as in work_precision.py: max |F̄ - F̄_ref| / peak at its output times, pointwise where
 F̄_ref > 1e-3 of its peak. Run time: the second call of a jitted ``force_curve`` (forward
 mode), single thread, so it compares the bands, not the speed. About 25 minutes on 2 cores
-(the default time tolerance 1e-8 takes thousands of BDF2 steps). Writes
-benchmarks/out/mesh_regions.md.
+(the default time tolerance 1e-8 takes thousands of BDF2 steps; ``--trade`` ~8 minutes). Writes
+benchmarks/out/mesh_regions.md (mesh_regions_trade.md with ``--trade``).
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ from lubjax._solve import _relax_mesh  # noqa: E402
 SCENES = [(100.0, 0.5, 1.0), (100.0, 0.5, 5.0), (100.0, 2.0, 5.0)]
 BANDS = [(0.0, 0.6), (0.6, 0.85), (0.85, 1.2), (1.2, 1.6), (1.6, 4.0), (4.0, 10.0),
          (10.0, np.inf)]
+TRADE_FACTORS = (1.15, 1.4)
 
 
 def refined(mesh: lubjax.Mesh, lo: float, hi: float) -> lubjax.Mesh:
@@ -77,6 +80,8 @@ def main(argv=None):
     ap.add_argument("--time-rtol", type=float, default=1e-8,
                     help="time tolerance of every run (far below the meshes' errors)")
     ap.add_argument("--order", type=int, choices=(1, 2, 3), default=2)
+    ap.add_argument("--trade", action="store_true",
+                    help="a coarser fine zone with the first growing cells split, not the bands")
     args = ap.parse_args(argv)
     start = time.perf_counter()
     times = wp.all_output_times()
@@ -90,9 +95,18 @@ def main(argv=None):
             base = _relax_mesh(mesh_settings, lubjax.RampHold(), z0, beta, t_end)
             settings = dataclasses.replace(mesh_settings, rtol=args.time_rtol, order=args.order)
             variants = [("base", base)]
-            variants += [(f"refine [{lo:g}, {hi:g}]", refined(base, lo, hi)) for lo, hi in BANDS]
-            variants += [(f"coarsen [{lo:g}, {hi:g}]", coarsened(base, lo, hi))
-                         for lo, hi in BANDS[:1]]
+            if args.trade:
+                dr = mesh_settings.mesh_parameters()[0]
+                for factor in TRADE_FACTORS:
+                    coarser = dataclasses.replace(mesh_settings, dr=dr * factor)
+                    mesh = _relax_mesh(coarser, lubjax.RampHold(), z0, beta, t_end)
+                    variants.append((f"Δr̄ × {factor:g}, split [1.6, 10]",
+                                     refined(mesh, 1.6, 10.0)))
+            else:
+                variants += [(f"refine [{lo:g}, {hi:g}]", refined(base, lo, hi))
+                             for lo, hi in BANDS]
+                variants += [(f"coarsen [{lo:g}, {hi:g}]", coarsened(base, lo, hi))
+                             for lo, hi in BANDS[:1]]
             for label, mesh in variants:
                 force, run_s = run(mesh, settings, beta, z0, t_end, t_out)
                 err, point = wp.errors(force, ref)
@@ -103,13 +117,16 @@ def main(argv=None):
     mach = machine.describe()
     command = ("python benchmarks/mesh_regions.py --rtols "
                + " ".join(f"{r:g}" for r in args.rtols) + f" --time-rtol {args.time_rtol:g}"
-               + (f" --order {args.order}" if args.order != 2 else ""))
+               + (f" --order {args.order}" if args.order != 2 else "")
+               + (" --trade" if args.trade else ""))
     lines = [
         f"# Where the spatial error lives ({machine.label(mach)})",
         "",
         f"`{command}` ({time.perf_counter() - start:.0f} s in all). The mesh `relax` uses at "
-        "rtol (with its contact refinements), one band's cells split (or every other node "
-        f"dropped), time tolerance {args.time_rtol:g}; error against "
+        "rtol (with its contact refinements), "
+        + ("and that of a fine zone 1.15 or 1.4 times coarser with the cells of [1.6, 10] split"
+           if args.trade else "one band's cells split (or every other node dropped)")
+        + f", time tolerance {args.time_rtol:g}; error against "
         "benchmarks/work_precision.py's reference.",
         "",
         "| β | z̄0 | t̄ ≤ | mesh of rtol | variant | nodes | error / peak | pointwise | run s |",
@@ -118,7 +135,8 @@ def main(argv=None):
     for beta, z0, t_end, rtol, label, nodes, err, point, run_s in rows:
         lines.append(f"| {beta:g} | {z0:g} | {t_end:g} | {rtol:g} | {label} | {nodes} | "
                      f"{err:.2e} | {point:.2e} | {run_s:.2f} |")
-    machine.write_report(Path(__file__).resolve().parent / "out" / "mesh_regions.md", lines)
+    name = "mesh_regions_trade.md" if args.trade else "mesh_regions.md"
+    machine.write_report(Path(__file__).resolve().parent / "out" / name, lines)
 
 
 if __name__ == "__main__":
