@@ -438,17 +438,15 @@ def _interpolate(t_query, times, values, degree, xp=jnp):
     host (:func:`evaluate_host`)."""
     tm, t0, t1, t2 = times
     ym, y0, y1, y2 = values
-    lin = y1 + (t_query - t1) / (t2 - t1) * (y2 - y1)
     # Levels a lower degree does not use may coincide with t1 (a segment's first steps): move
     # them so no branch divides by zero (a NaN in an unselected branch would still poison
     # reverse-mode gradients).
     t0 = xp.where(degree == 1, 2.0 * t1 - t2, t0)
     tm = xp.where(degree < 3, 2.0 * t0 - t1, tm)
-    l0 = (t_query - t1) * (t_query - t2) / ((t0 - t1) * (t0 - t2))
-    l1 = (t_query - t0) * (t_query - t2) / ((t1 - t0) * (t1 - t2))
-    l2 = (t_query - t0) * (t_query - t1) / ((t2 - t0) * (t2 - t1))
-    quad = l0 * y0 + l1 * y1 + l2 * y2
-    cubic = ctrl.lagrange(t_query - t2, (t2 - tm, t2 - t0, t2 - t1, 0.0), (ym, y0, y1, y2))
+    x = t_query - t2
+    lin = ctrl.lagrange(x, (t2 - t1, 0.0), (y1, y2))
+    quad = ctrl.lagrange(x, (t2 - t0, t2 - t1, 0.0), (y0, y1, y2))
+    cubic = ctrl.lagrange(x, (t2 - tm, t2 - t0, t2 - t1, 0.0), (ym, y0, y1, y2))
     return xp.where(degree == 1, lin, xp.where(degree == 2, quad, cubic))
 
 
