@@ -9,7 +9,7 @@ growth 1.05, L̄ = 2000); two more tight runs, one with a coarser far field (gro
 one with a coarser fine zone and tolerance (rtol 3e-7, dr = 0.0075, growth 1.15, L̄ = 500), show
 how far the reference itself is converged ("ref. change" columns: the larger change). Reference
 runs are cached in benchmarks/out/cache/ (committed; delete to recompute: about an hour), named
-by their settings, mesh and ``lubjax._stepper.DISCRETISATION``.
+by their settings, mesh and ``lubjax._discretisation.DISCRETISATION``.
 
 Columns (all maxima over the output times):
 * F/peak: |F̄ - F̄_ref| / max F̄_ref;
@@ -36,8 +36,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import lubjax  # noqa: E402
 from benchmarks.machine import label, write_report  # noqa: E402
+from lubjax._discretisation import DISCRETISATION  # noqa: E402
 from lubjax._solve import _final_contact_radius  # noqa: E402
-from lubjax._stepper import DISCRETISATION  # noqa: E402
 
 BETAS = (1.0, 10.0, 100.0, 1000.0)
 Z0S = (0.5, 0.9, 1.0, 1.11, 2.0)

@@ -28,7 +28,7 @@ CHILD = r"""
 import json, sys, time
 import lubjax
 from lubjax import _compiler, _solve
-from lubjax._stepper import discretise
+from lubjax._discretisation import discretise
 from lubjax._substrate import as_substrate
 
 mode, options = sys.argv[1], json.loads(sys.argv[2])

@@ -19,11 +19,19 @@ from ._analytic import (  # noqa: E402
     rigid_squeeze_pressure,
 )
 from ._compile_cache import enable_compilation_cache  # noqa: E402
+from ._controller import Tolerance  # noqa: E402
+from ._discretisation import (  # noqa: E402
+    Discretisation,
+    discretise,
+    displacement,
+    film_thickness,
+)
 from ._drives import FreeSphere, Load, Spring, Travel, as_drive, restitution  # noqa: E402
 from ._indenter import RampHold, SampledTravel  # noqa: E402
 from ._influence import force_weights, influence_matrix, kernel  # noqa: E402
 from ._layer import layer_influence_matrix, layer_thickness_bar  # noqa: E402
 from ._mesh import Mesh, graded_mesh, uniform_mesh  # noqa: E402
+from ._rollout import State, Step, Trajectory, evaluate, rollout  # noqa: E402
 from ._solve import (  # noqa: E402
     BETA_RANGE,
     Z0_RANGE,
@@ -35,18 +43,6 @@ from ._solve import (  # noqa: E402
     force_curve,
     make_plan,
     relax,
-)
-from ._stepper import (  # noqa: E402
-    Discretisation,
-    State,
-    Step,
-    Tolerance,
-    Trajectory,
-    discretise,
-    displacement,
-    evaluate,
-    film_thickness,
-    rollout,
 )
 from ._substrate import HalfSpace, Layer, Viscoelastic  # noqa: E402
 from ._sweep import SweepResult, sweep  # noqa: E402

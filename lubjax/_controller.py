@@ -1,40 +1,39 @@
-r"""Step-size control: the embedded error estimate and the PI controller.
+r"""Step-size control: the tolerance, the error norm, the PI controller, and how a run ends.
 
-Error estimate (Milne's device, Hairer, Nørsett & Wanner I §III.7). With the step
-Δt = t_{n+1} - t_n, the previous steps Δt₁ = t_n - t_{n-1}, Δt₂ = t_{n-1} - t_{n-2}, the
-variable-step BDF2 corrector a₀yⁿ⁺¹ + a₁yⁿ + a₂yⁿ⁻¹ = Δt f(yⁿ⁺¹) has the local error
+The step (:func:`lubjax._stepper.step`) returns a candidate level with Milne estimates of its
+local error (:mod:`lubjax._multistep`); here
 
-    y(t_{n+1}) - yⁿ⁺¹ ≈ C_c y''',   C_c = -(a₁ Δt³ + a₂ (Δt + Δt₁)³) / (6 a₀),
-
-and the quadratic extrapolation y_p through the last three accepted levels has
-
-    y(t_{n+1}) - y_p ≈ C_p y''',    C_p = Δt (Δt + Δt₁)(Δt + Δt₁ + Δt₂) / 6,
-
-so the computable difference yⁿ⁺¹ - y_p = (C_p - C_c) y''' estimates the corrector's error as
-C_c/(C_p - C_c) (yⁿ⁺¹ - y_p) at no extra linear solve. For constant steps this is the classical
--2/11 (yⁿ⁺¹ - y_p). A backward-Euler step (C_c = -Δt²/2) is paired with linear extrapolation
-(C_p = Δt(Δt + Δt₁)/2) in the same way, and a BDF3 step (``Settings(order=3)``) with the cubic
-through four levels: with the distances u_j = t_{n+1} - t_{n+1-j} of the formula's levels,
-
-    C_c = (a₁u₁⁴ + a₂u₂⁴ + a₃u₃⁴) / (24 a₀),   C_p = u₁u₂u₃u₄ / 24.
+* :func:`error_ratio` scales those estimates into one number ε (≤ 1: within tolerance);
+* :func:`admissible` says whether the candidate may be kept at all (finite, positive film, no
+  negative force where the drive only squeezes);
+* :func:`adapt` decides: accept or reject, the next Δt̄, a restart after a breakpoint, and the
+  run's :class:`Status`;
+* :func:`propose` lands the next attempt on the history's next velocity jump, and
+  :func:`choose_order` picks each attempt's formula.
 
 Controller: the PI controller of Gustafsson (Hairer & Wanner II §IV.2; diffrax's
-``PIDController`` with ``pcoeff = 0.4, icoeff = 0.3``), on the error ratio ε = ‖est‖/tol:
+``PIDController`` with ``pcoeff = 0.4, icoeff = 0.3``), on the error ratio ε:
 
-    Δt_new = Δt · clip(safety · ε_n^{-(β₁)/k} · ε_{n-1}^{β₂/k}, f_min, f_max),   k = order + 1,
+    Δt_new = Δt · clip(safety · ε_n^{-β₁/k} · ε_{n-1}^{β₂/k}, f_min, f_max),   k = order + 1,
 
-with β₁ = 0.7, β₂ = 0.4 (k = 4 for BDF3). The growth is capped at 1.5: variable-step BDF2 is
-zero-stable only for step ratios below 1 + √2, and its error constant and Milne's estimate of
-it degrade on the way: with a cap of 2, a ×2 step in the ramp of β = 100, z̄0 = 2 was accepted
-with a force error 13 times its tolerance (1.1e-3 of the peak against the converged reference;
-6.4e-4 with the cap 1.5, for 0.6 % more steps; benchmarks/accuracy.py). The same cap serves
-BDF3, stable on grids whose step ratios stay below 2.553 (Z. Li & H.-l. Liao, "Stability of
-variable-step BDF2 and BDF3 methods"). A rejected step shrinks by safety · ε^{-1/k} (at least
-×0.1, at most ×0.9); a step that loses positivity or finiteness shrinks by ×0.25.
+with β₁ = 0.7, β₂ = 0.4. The growth is capped at 1.5: variable-step BDF2 is zero-stable only
+for step ratios below 1 + √2, and its error constant and Milne's estimate of it degrade on the
+way: with a cap of 2, a ×2 step in the ramp of β = 100, z̄0 = 2 is accepted with a force error
+13 times its tolerance (1.1e-3 of the peak against the converged reference; 6.4e-4 with the cap
+1.5, for 0.6 % more steps; benchmarks/accuracy.py). The same cap serves BDF3, stable on grids
+whose step ratios stay below 2.553 (Z. Li & H.-l. Liao, "Stability of variable-step BDF2 and
+BDF3 methods"). A rejected step shrinks by safety · ε^{-1/k} (at least ×0.1, at most ×0.9); a
+step that is not admissible shrinks by ×0.25.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import enum
+import functools
+from typing import NamedTuple
+
+import jax
 import jax.numpy as jnp
 
 SAFETY = 0.9
@@ -44,55 +43,264 @@ MAX_GROWTH = 1.5
 MIN_SHRINK = 0.1
 INVALID_SHRINK = 0.25
 
-
-def milne_factor(order, dt, dt1, dt2, a0, a1, a2, third=None):
-    """C_c/(C_p - C_c): multiplies (corrector - predictor) to estimate the corrector's error.
-    ``third`` = (Δt₃, a₃) where the step may be BDF3 (order 3); None: orders 1 and 2 only."""
-    bdf2_c = -(a1 * dt**3 + a2 * (dt + dt1) ** 3) / (6.0 * a0)
-    bdf2_p = dt * (dt + dt1) * (dt + dt1 + dt2) / 6.0
-    be_c = -0.5 * dt**2
-    be_p = 0.5 * dt * (dt + dt1)
-    c = jnp.where(order == 2, bdf2_c, be_c)
-    p = jnp.where(order == 2, bdf2_p, be_p)
-    if third is not None:
-        dt3, a3 = third
-        u1, u2, u3 = dt, dt + dt1, dt + dt1 + dt2
-        c = jnp.where(order == 3, (a1 * u1**4 + a2 * u2**4 + a3 * u3**4) / (24.0 * a0), c)
-        p = jnp.where(order == 3, u1 * u2 * u3 * (u3 + dt3) / 24.0, p)
-    return c / (p - c)
+# The force's absolute floor: above its rounding in the solve (~4e-14, where a smooth start makes
+# it emerge from zero) and below 1e-6 of the smallest peak force of the mapped range (~1.5e-3 at
+# β = 10³, z̄0 = 2). The film's floor is Settings.atol (1e-9): a relative control of the thinnest
+# necks (h̄ ~ 1e-7 at β = 10⁶) stalls on their rounding on coarse meshes.
+FORCE_ATOL = 1e-12
+#: Below this |F̄| (10 × its absolute tolerance) steps are backward Euler (:func:`choose_order`).
+BACKWARD_EULER_FORCE = 10.0 * FORCE_ATOL
+#: How much the force's tolerance tightens per decade a tail has decayed below its peak.
+TAIL_TIGHTENING = 3.0
 
 
-def extrapolate(order, dt, dt1, dt2, y, y1, y2, third=None):
-    """Predictor: the polynomial through the last ``order + 1`` accepted levels, at t_n + Δt.
+@functools.partial(
+    jax.tree_util.register_dataclass,
+    data_fields=["rtol", "atol", "initial_step", "force_floor"],
+    meta_fields=["order", "max_steps"],
+)
+@dataclasses.dataclass(frozen=True)
+class Tolerance:
+    """What the controller needs. A pytree: the numbers (rtol, atol, initial_step,
+    force_floor) are leaves, so a tolerance passed to ``jit`` as an argument is traced and one
+    compiled program serves every tolerance; ``order`` and ``max_steps`` shape the program and
+    are static. Closed over (as ``sweep`` and the fits do), it is a constant of the program.
 
-    y, y1, y2 are the values at t_n, t_n - Δt₁, t_n - Δt₁ - Δt₂ (Lagrange form); ``third`` =
-    (Δt₃, y3), the level before those, where the step may be BDF3 (cubic predictor).
+    rtol, atol: the step's estimated local error e (film h̄ at every node, and F̄) must satisfy
+        |e| ≤ atol + rtol·|value|; a free gap z̄, |e| ≤ atol + rtol·max|z̄ - z̄_start|.
+    initial_step: the first step after t̄_start and after each velocity jump, divided by
+        max(1, β).
+    order: 2 (BDF2), 1 (backward Euler throughout) or 3 (BDF3 from a segment's fourth step).
+    max_steps: the attempt budget (accepted + rejected).
+    force_floor: F̄ is held to rtol relative to max(|F̄|, force_floor × its peak so far).
     """
-    # Linear (order 1): through (t_n, y), (t_{n-1}, y1).
-    lin = y + dt / dt1 * (y - y1)
-    # Quadratic (order 2), nodes at offsets 0, -dt1, -(dt1+dt2) from t_n, evaluated at +dt.
-    s1, s2 = dt1, dt1 + dt2
-    l0 = (dt + s1) * (dt + s2) / (s1 * s2)
-    l1 = dt * (dt + s2) / (-s1 * (s2 - s1))
-    l2 = dt * (dt + s1) / (s2 * (s2 - s1))
-    quad = l0 * y + l1 * y1 + l2 * y2
-    out = jnp.where(order == 2, quad, lin)
-    if third is not None:
-        dt3, y3 = third
-        out = jnp.where(order == 3, lagrange(dt, (0.0, s1, s2, s2 + dt3), (y, y1, y2, y3)), out)
-    return out
+
+    rtol: float = 1e-4
+    atol: float = 1e-9
+    initial_step: float = 1e-5
+    order: int = 2
+    max_steps: int = 20_000
+    force_floor: float = 1e-8
 
 
-def lagrange(x, offsets, values):
-    """The polynomial through the points (-offsets[i], values[i]), at x (distinct offsets)."""
-    total = 0.0
-    for i, (si, yi) in enumerate(zip(offsets, values)):
-        weight = 1.0
-        for j, sj in enumerate(offsets):
-            if j != i:
-                weight = weight * (x + sj) / (sj - si)
-        total = total + weight * yi
-    return total
+DEFAULT_TOLERANCE = Tolerance()
+
+
+class Status(enum.IntEnum):
+    """How a run stands; :func:`stop_reason` says it in words."""
+
+    RUNNING = 0  # (at the end of a run: the attempt budget ran out)
+    DONE = 1
+    STEP_TOO_SMALL = 2
+
+
+# Plain integers inside the compiled loop.
+RUNNING, DONE, STEP_TOO_SMALL = (int(s) for s in Status)
+
+_STOP_REASONS = {
+    Status.DONE: "",
+    Status.STEP_TOO_SMALL: (
+        "the step size collapsed (every shorter step was rejected: the film would lose "
+        "positivity, or the local error estimate stayed above the tolerance); refine the "
+        "mesh (Settings.dr) or check the parameters"
+    ),
+    Status.RUNNING: (
+        "the step budget Settings.max_steps = {max_steps} ran out; raise it "
+        "(CLI: --max-steps) or shorten t_end"
+    ),
+}
+
+
+def stop_reason(status, max_steps: int) -> str:
+    """Why a run with this final status stopped before t_end ('' if it did not)."""
+    return _STOP_REASONS[Status(int(status))].format(max_steps=max_steps)
+
+
+class ControllerState(NamedTuple):
+    """The controller's memory between attempts."""
+
+    dt_next: jax.Array  # the next attempt's Δt̄
+    error_prev: jax.Array  # ε of the last accepted step (the PI controller's integral term)
+    last_rejected: jax.Array  # do not grow straight after a rejection
+    since_restart: jax.Array  # accepted steps since the last (re)start: 0, 1, 2, ...
+
+
+class Peaks(NamedTuple):
+    """Running maxima the error norm scales by."""
+
+    force: jax.Array  # max F̄ so far (the scale of roundoff in F̄)
+    velocity: jax.Array  # max |v̄| so far
+    excursion: jax.Array  # max |z̄ - z̄_start| so far (a free gap's scale)
+
+
+class Decision(NamedTuple):
+    """What :func:`adapt` decides about one attempt."""
+
+    accept: jax.Array
+    accepted: ControllerState  # the controller's state if the step is kept ...
+    rejected: ControllerState  # ... and if it is not
+    status_accepted: jax.Array
+    status_rejected: jax.Array
+
+
+def restart_step(tol: Tolerance, beta):
+    """First step at t̄_start and after each velocity jump: the pressure's fast scale 1/β."""
+    return tol.initial_step / jnp.maximum(1.0, beta)
+
+
+def initial_controller(tol: Tolerance, beta, dtype) -> ControllerState:
+    return ControllerState(
+        dt_next=jax.lax.stop_gradient(restart_step(tol, beta)),
+        error_prev=jnp.asarray(1.0, dtype),
+        last_rejected=jnp.asarray(False),
+        since_restart=jnp.asarray(0, jnp.int32),
+    )
+
+
+def propose(t, dt_next, breakpoints, t_end):
+    """The next attempt's end t_new and whether it lands on the next velocity jump (or t_end):
+    a step that would pass it is shortened to end there."""
+    later = jnp.where(breakpoints > t, breakpoints, jnp.inf)
+    target = jnp.minimum(jnp.min(later, initial=jnp.inf), t_end)
+    lands = dt_next >= target - t
+    return jnp.where(lands, target, t + dt_next), lands
+
+
+def choose_order(controller: ControllerState, force, peaks: Peaks, max_order: int):
+    """The attempt's formula: backward Euler for a segment's first two steps (lagged mobility,
+    then linear extrapolation), BDF2 from the third, BDF3 from the fourth where ``max_order`` is
+    3.
+
+    Where the force has decayed below its absolute tolerance (a tail, z̄0 > 1), nothing holds it
+    to a relative error and the steps outgrow its decay time 1/λ: BDF2's roots are complex for
+    Δt̄λ > 1/2, so the uncontrolled tail oscillates through zero. Backward Euler's factor
+    1/(1 + Δt̄λ) is positive: the tail decays without changing sign, on the same steps (the film
+    there hardly changes). Only a force that was above the threshold and fell back: one still
+    emerging from zero at the start keeps BDF2 (backward Euler there changes the early steps
+    and, through them, later errors).
+    """
+    tail = (jnp.abs(force) < BACKWARD_EULER_FORCE) & (peaks.force >= BACKWARD_EULER_FORCE)
+    order = jnp.where((controller.since_restart >= 2) & (max_order >= 2) & ~tail, 2, 1)
+    if max_order == 3:
+        order = jnp.where((controller.since_restart >= 3) & (order == 2), 3, order)
+    return order
+
+
+def error_ratio(estimate, level, previous, peaks: Peaks, tol: Tolerance, drive, gap_start):
+    """ε = the largest of the scaled Milne estimates (≤ 1: within tolerance).
+
+    ``estimate``: the step's error estimates (film at every node, force, gap, velocity);
+    ``level`` the candidate, ``previous`` the last accepted level (both :class:`Level`);
+    ``gap_start``: z̄ at t̄_start.
+
+    * Film: |e| ≤ atol + rtol · max(|h̄ⁿ⁺¹|, |h̄ⁿ|) at every node.
+    * Force: rtol relative to itself down to force_floor × its peak so far, and to rtol × that
+      floor below it. A decaying tail far below the peak is not resolvable anyway: the solve's
+      rounding (~1e-14 of the peak) makes steps collapse at F̄ ~ 1e-10 of the peak with
+      rtol = 1e-7, and a measured travel's quantisation drives a force ~1e-7 of the peak that
+      relative control would chase through 10⁴ steps.
+      In a decaying tail (z̄0 > 1: F̄ ∝ e^{-θ}, θ = cβt̄) the relative local errors add up: the
+      relative global error grows with the e-folds already decayed, 2-3 % where F̄ has fallen to
+      10⁻⁶ of its peak at rtol per step. So the force's relative tolerance is divided by
+      1 + TAIL_TIGHTENING × the decades D decayed below the peak. With local errors c Δθ³ ≤
+      tolerance the global error grows like ∫(1 + 3D)^{-2/3} dθ instead of θ: 0.28 of it at
+      10⁻⁶ (rtol/19 there), for twice the steps in the tail. At a plateau the tolerance stays
+      rtol, where a tighter one chases the force's rounding in the thinnest films (β = 10⁶).
+      A force emerging from exactly zero (a quiet stretch) has no relative error to estimate
+      until it is nonzero; the film criterion covers that step. A prescribed force has no error
+      of the solver's.
+    * A free gap (force control, spring, free sphere): its approach z̄_start - z̄ is what a run
+      reports, and a small part of the film it sits in (under 30 mN on the paper's tribometer,
+      1 d_c out of 5.5): held only through h̄(0), it came out 4× rtol of the final approach off.
+      So the gap is held to rtol relative to its largest excursion from the start so far.
+    * A free sphere's velocity is a state of its own ODE: held relative to the largest speed so
+      far (it passes through zero at the turning point).
+    """
+    scale_h = tol.atol + tol.rtol * jnp.maximum(jnp.abs(level.film), jnp.abs(previous.film))
+    force, force_prev = level.force, previous.force
+    magnitude = jnp.maximum(
+        jnp.maximum(jnp.abs(force), jnp.abs(force_prev)), tol.force_floor * peaks.force
+    )
+    tiny = jnp.finfo(magnitude.dtype).tiny
+    decades = jnp.log10(
+        jnp.maximum(jnp.maximum(peaks.force, magnitude), tiny) / jnp.maximum(magnitude, tiny)
+    )
+    scale_f = FORCE_ATOL + tol.rtol * magnitude / (1.0 + TAIL_TIGHTENING * decades)
+    check_force = (force_prev != 0) & (not drive.prescribes_force)
+    force_error = jnp.where(check_force, jnp.abs(estimate.force) / scale_f, 0.0)
+    error = jnp.maximum(jnp.max(jnp.abs(estimate.film) / scale_h), force_error)
+    if not drive.prescribes_gap:
+        excursion = jnp.maximum(peaks.excursion, jnp.abs(level.gap - gap_start))
+        error = jnp.maximum(error, jnp.abs(estimate.gap) / (tol.atol + tol.rtol * excursion))
+    if drive.inertia:
+        scale_v = tol.atol + tol.rtol * jnp.maximum(
+            jnp.maximum(jnp.abs(level.velocity), jnp.abs(previous.velocity)), peaks.velocity
+        )
+        error = jnp.maximum(error, jnp.abs(estimate.velocity) / scale_v)
+    return error
+
+
+def update_peaks(peaks: Peaks, level, gap_start) -> Peaks:
+    """The running maxima with an accepted level."""
+    return Peaks(
+        force=jnp.maximum(peaks.force, level.force),
+        velocity=jnp.maximum(peaks.velocity, jnp.abs(level.velocity)),
+        excursion=jnp.maximum(peaks.excursion, jnp.abs(level.gap - gap_start)),
+    )
+
+
+def admissible(level, peaks: Peaks, drive):
+    """Positivity is part of acceptance: a step that thins the film through zero (or gives
+    NaN) is retried shorter. So is a negative force (beyond roundoff of the peak) where the
+    drive only squeezes the film (a monotone approach or hold: its pressure pushes back, no
+    cavitation model); BDF2 would otherwise overshoot a fast-decaying force below zero."""
+    roundoff = FORCE_ATOL + 1e-13 * jnp.maximum(peaks.force, jnp.abs(level.force))
+    negative_force = drive.force_nonnegative & (level.force < -roundoff)
+    return (
+        jnp.all(jnp.isfinite(level.pressure)) & jnp.isfinite(level.gap_step)
+        & jnp.all(level.film > 0) & ~negative_force
+    )
+
+
+def adapt(error, valid, controller: ControllerState, order, t, t_new, lands, t_end, status,
+          first_step) -> Decision:
+    """Accept or reject an attempt t → ``t_new`` of error ratio ``error``; the next Δt̄.
+
+    A segment's first step (after t̄_start or a breakpoint) has no estimate: it is accepted if
+    admissible and the next grows by the largest ratio. A step that lands on a breakpoint
+    restarts the integration there with ``first_step`` (the pressure adjusts on the fast time
+    scale 1/β). The step sizes are not differentiated (like diffrax's controllers): derivatives
+    are those of the discrete solution on the steps taken; differentiating the controller's
+    choices adds nothing accurate (those terms are O(tolerance)) and is unstable (the estimate
+    jumps where a measured history has kinks, and its tangent grows to 1e20). Collapse: a
+    rejected step whose successor would hardly change t in float64 (tight tolerances
+    legitimately take steps far below the restart step in a power-law start).
+    """
+    fresh = controller.since_restart == 0
+    error = jnp.where(fresh, 0.0, error)
+    valid = valid & ~jnp.isnan(error)
+    accept = valid & (error <= 1.0)
+    factor = next_step_factor(
+        accept, valid, error, controller.error_prev, order, controller.last_rejected
+    )
+    factor = jnp.where(fresh, MAX_GROWTH, factor)
+    dt_next = (t_new - t) * factor
+    restart = accept & lands & (t_new < t_end)
+    dt_next = jax.lax.stop_gradient(jnp.where(restart, first_step, dt_next))
+    floor = jnp.maximum(1e-12 * first_step, 1e-13 * jnp.abs(t))
+    too_small = ~accept & (dt_next < floor)
+    return Decision(
+        accept=accept,
+        accepted=ControllerState(
+            dt_next=dt_next,
+            error_prev=jnp.maximum(error, 1e-4),
+            last_rejected=jnp.asarray(False),
+            since_restart=jnp.where(restart, 0, controller.since_restart + 1),
+        ),
+        rejected=controller._replace(dt_next=dt_next, last_rejected=jnp.asarray(True)),
+        status_accepted=jnp.where(t_new >= t_end, DONE, RUNNING),
+        status_rejected=jnp.where(too_small, STEP_TOO_SMALL, status),
+    )
 
 
 def next_step_factor(accepted, valid, error_ratio, error_ratio_prev, order, last_rejected):

@@ -110,12 +110,12 @@ class _Drive:
     def initial_velocity(self):
         return 0.0
 
-    def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
-            force, third=None):
-        """(α, s, b) of the closing row α F̄ⁿ⁺¹ + s Δz̄ = b for the step tⁿ = ``t`` → tⁿ⁺¹ =
-        ``t_new``; ``gap_step`` is the last step's Δz̄ⁿ = z̄ⁿ - z̄ⁿ⁻¹ as solved (not a difference of
-        the stored gaps, which rounds it to the gap's ulp); ``force`` is F̄ⁿ. ``third`` =
-        (a₃, Δz̄ⁿ⁻¹, v̄ⁿ⁻²) where the step may be BDF3 (``Settings(order=3)``), else None."""
+    def row(self, step):
+        """(α, s, b) of the closing row α F̄ⁿ⁺¹ + s Δz̄ = b for the step ``step``
+        (:class:`lubjax._stepper.StepRecord`: tⁿ = ``step.t`` → tⁿ⁺¹ = ``step.t_new``, Δt̄, the
+        BDF weights a₀..a₃ (a₃ None where no step can be BDF3) and the accepted levels, newest
+        first: ``step.history.gap_step[0]`` is Δz̄ⁿ = z̄ⁿ - z̄ⁿ⁻¹ as solved (not a difference of
+        the stored gaps, which rounds it to the gap's ulp), ``step.history.force[0]`` is F̄ⁿ)."""
         raise NotImplementedError
 
 
@@ -140,13 +140,12 @@ class Travel(_Drive):
         # Under a monotone approach or hold the film is only squeezed: its pressure pushes back.
         return _monotone_approach(self.history)
 
-    def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
-            force, third=None):
+    def row(self, step):
         # Δz̄ = d̄(tⁿ) - d̄(tⁿ⁺¹), not (z̄0 - d̄(tⁿ⁺¹)) - z̄ⁿ: that difference of O(1) gaps rounds
         # Δz̄ to the ulp of z̄ (2.2e-16 at z̄ ~ 1), a relative error of 1 in the squeeze velocity
         # once Δz̄ is that small (a smooth start, d̄ ∝ t̄², at Δt̄ ~ 1e-11: the layer's force
         # jumped 15 % between attempts and the steps collapsed). Zero while the sphere rests.
-        return 0.0, 1.0, self.history.travel(t) - self.history.travel(t_new)
+        return 0.0, 1.0, self.history.travel(step.t) - self.history.travel(step.t_new)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -172,9 +171,8 @@ class Load(_Drive):
     def load(self, t):
         return self.scale * self.history.travel(t)
 
-    def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
-            force, third=None):
-        return 1.0, 0.0, self.load(t_new)
+    def row(self, step):
+        return 1.0, 0.0, self.load(step.t_new)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -193,13 +191,13 @@ class Spring(_Drive):
     def force_nonnegative(self):
         return _monotone_approach(self.history)
 
-    def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
-            force, third=None):
+    def row(self, step):
         k = self.stiffness
         # The spring's stretch at tⁿ is F̄ⁿ/K̄ (the last row), so b = K̄(d̄ⁿ⁺¹ - d̄ⁿ) + F̄ⁿ rather
         # than K̄(d̄ⁿ⁺¹ - (z̄0 - z̄ⁿ)), whose O(1) difference rounds the stretch to the ulp of z̄
         # (as Travel's row explains).
-        return 1.0, -k, k * (self.history.travel(t_new) - self.history.travel(t)) + force
+        travel = self.history.travel(step.t_new) - self.history.travel(step.t)
+        return 1.0, -k, k * travel + step.history.force[0]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -237,14 +235,13 @@ class FreeSphere(_Drive):
     def initial_velocity(self):
         return self.velocity
 
-    def row(self, t, t_new, z0, dt, a0, a1, a2, gap, gap_step, velocity, velocity_prev,
-            force, third=None):
-        g = self.inverse_mass
-        b = a0 * a2 * gap_step - dt * (a1 * velocity + a2 * velocity_prev)
-        if third is not None:
+    def row(self, step):
+        g, dt, (a0, a1, a2, a3) = self.inverse_mass, step.dt, step.weights
+        gap_step, velocity = step.history.gap_step, step.history.velocity
+        b = a0 * a2 * gap_step[0] - dt * (a1 * velocity[0] + a2 * velocity[1])
+        if a3 is not None:
             # BDF3: v̄ⁿ⁺¹ = (a₀Δz̄ - a₂Δz̄ⁿ - a₃(Δz̄ⁿ + Δz̄ⁿ⁻¹))/Δt̄, one more velocity level
-            a3, gap_step_prev, velocity_prev2 = third
-            b = b + a0 * a3 * (gap_step + gap_step_prev) - dt * a3 * velocity_prev2
+            b = b + a0 * a3 * (gap_step[0] + gap_step[1]) - dt * a3 * velocity[2]
         return -(dt**2) * g, a0**2, b - dt**2 * g * self.weight
 
 

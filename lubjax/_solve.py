@@ -14,20 +14,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _compiler
+from ._controller import DONE, Tolerance, stop_reason
+from ._discretisation import Discretisation, discretise
 from ._drives import Load, Travel, as_drive
 from ._indenter import RampHold, SampledTravel
 from ._mesh import Mesh, graded_mesh
-from ._stepper import (
-    DONE,
-    STEP_TOO_SMALL,
-    Discretisation,
-    Step,
-    Tolerance,
-    discretise,
-    evaluate,
-    evaluate_host,
-    rollout,
-)
+from ._rollout import Step, evaluate, evaluate_host, rollout
 from ._substrate import HalfSpace, as_substrate
 from ._threads import single_threaded_blas
 
@@ -635,8 +627,34 @@ def relax(
             for fn, (d, t, pt) in zip(compiled, runs)
         ]
     run_s = time.perf_counter() - start
-    traj = trajs[0]
+    result = _result_of(trajs, disc, beta, z0, t_end, ptimes, tol.max_steps, compile_s, run_s)
+    if not result.ok and check != "flag":
+        msg = f"relax(beta={beta}, z0={z0}): " + "; ".join(result.problems())
+        if check == "raise":
+            raise SolverError(msg)
+        warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    return result
 
+
+def _errors_of(series, trajs) -> dict:
+    """Each estimated series' error from the estimate's coarse runs (NaN where they were not
+    run). On the host (evaluate_host): evaluating with jax compiles ~40 small programs."""
+    if len(trajs) == 1:
+        return {f: np.full_like(series[f], np.nan) for f in _ESTIMATED}
+    coarse, loose = (tr.steps for tr in trajs[1:])
+    return {
+        f: error_estimate(
+            series[f],
+            evaluate_host(coarse, series["t"], f),
+            evaluate_host(loose, series["t"], f),
+        )
+        for f in _ESTIMATED
+    }
+
+
+def _result_of(trajs, disc, beta, z0, t_end, ptimes, max_steps, compile_s, run_s) -> Result:
+    """The :class:`Result` of a run (``trajs[0]``) and its error estimate's runs."""
+    traj = trajs[0]
     steps = traj.steps
     keep = np.asarray(steps.accepted)
     series = {k: np.asarray(getattr(steps, k))[keep] for k in _SERIES}
@@ -645,37 +663,9 @@ def relax(
     h = np.asarray(traj.profile_films)
     # w̄ = -Ŵū from h̄ = z̄ + r̄²/2 - w̄ (ū ≠ p̄ on a viscoelastic substrate)
     w = z[:, None] + 0.5 * np.asarray(disc.r) ** 2 - h
-    if settings.error_estimate:
-        # On the host (evaluate_host): evaluating with jax compiled ~40 small programs.
-        coarse, loose = (tr.steps for tr in trajs[1:])
-        errors = {
-            f: error_estimate(
-                series[f],
-                evaluate_host(coarse, series["t"], f),
-                evaluate_host(loose, series["t"], f),
-            )
-            for f in _ESTIMATED
-        }
-    else:
-        errors = {f: np.full_like(series[f], np.nan) for f in _ESTIMATED}
-    force_error, gap_error = errors["force"], errors["gap"]
-    film_center_error, film_min_error = errors["film_center"], errors["film_min"]
+    errors = _errors_of(series, trajs)
     status = int(traj.status)
-    finished = status == DONE
-    if finished:
-        reason = ""
-    elif status == STEP_TOO_SMALL:
-        reason = (
-            "the step size collapsed (every shorter step was rejected: the film would lose "
-            "positivity, or the local error estimate stayed above the tolerance); refine the "
-            "mesh (Settings.dr) or check the parameters"
-        )
-    else:
-        reason = (
-            f"the step budget Settings.max_steps = {tol.max_steps} ran out; raise it "
-            "(CLI: --max-steps) or shorten t_end"
-        )
-    result = Result(
+    return Result(
         beta=float(beta),
         z0=float(z0),
         t_end=t_end,
@@ -687,21 +677,12 @@ def relax(
         film=h,
         finite=bool(np.all(np.isfinite(series["force"])) and np.all(np.isfinite(p))),
         film_positive=bool(np.all(series["film_min"] > 0)),
-        finished=finished,
-        stop_reason=reason,
-        force_error=force_error,
-        gap_error=gap_error,
-        film_center_error=film_center_error,
-        film_min_error=film_min_error,
+        finished=status == DONE,
+        stop_reason=stop_reason(status, max_steps),
+        **{f"{f}_error": errors[f] for f in _ESTIMATED},
         accepted=int(traj.accepted),
         rejected=int(traj.rejected),
         compile_s=compile_s,
         run_s=run_s,
         steps=jax.tree_util.tree_map(jnp.asarray, steps),
     )
-    if not result.ok and check != "flag":
-        msg = f"relax(beta={beta}, z0={z0}): " + "; ".join(result.problems())
-        if check == "raise":
-            raise SolverError(msg)
-        warnings.warn(msg, RuntimeWarning, stacklevel=2)
-    return result

@@ -30,6 +30,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -52,6 +54,9 @@ class HalfSpace:
 
     def compliance(self):
         return _ELASTIC
+
+    def step_loads(self, step):
+        return _elastic_step_loads(step)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,9 +100,36 @@ class Layer:
     def compliance(self):
         return _ELASTIC
 
+    def step_loads(self, step):
+        return _elastic_step_loads(step)
+
 
 #: (J₀, J_k, λ_k) of an elastic substrate: the creep compliance in the stepper's form.
 _ELASTIC = (1.0, np.zeros(0), np.ones(0))
+
+
+class StepLoads(NamedTuple):
+    """The elastic load ūⁿ⁺¹ of a step as a function of the new pressure p̄ⁿ⁺¹, in the form the
+    step's linear system takes it: ūⁿ⁺¹ = c p̄ⁿ⁺¹ + (what the history fixes)."""
+
+    compliance: object  # c; None on an elastic substrate (c = 1, the elastic arithmetic)
+    known: jax.Array  # a₀ūⁿ⁺¹ - a₀c p̄ⁿ⁺¹ + a₁ūⁿ + a₂ūⁿ⁻¹ (+ a₃ūⁿ⁻²)
+    loads: Callable  # p̄ⁿ⁺¹ ↦ (memory qⁿ⁺¹ (K, N), ūⁿ⁺¹ (N,))
+
+
+def _history_sum(weights, levels):
+    """a₁ x[0] + a₂ x[1] (+ a₃ x[2] where a step can be BDF3), summed in this order."""
+    _, a1, a2, a3 = weights
+    total = a1 * levels[0] + a2 * levels[1]
+    return total if a3 is None else total + a3 * levels[2]
+
+
+def _elastic_step_loads(step) -> StepLoads:
+    """ū = p̄: no memory (K = 0). The arithmetic the stepper had before substrates, bit for bit
+    (adding zero memory terms changes the rounding, and fits' convergence with it)."""
+    memory = step.history.memory[0]
+    return StepLoads(None, _history_sum(step.weights, step.history.elastic_load),
+                     lambda p: (memory, p))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -201,6 +233,31 @@ class Viscoelastic:
     def compliance(self):
         ret = jnp.asarray(self.retardation)
         return 1.0 - jnp.sum(ret), ret, jnp.asarray(self.times)
+
+    def step_loads(self, step) -> StepLoads:
+        """(V) by the step's BDF formula: qⁿ⁺¹ = (Δt̄J_k p̄ⁿ⁺¹/λ_k - Σ_{j≥1} a_j q^{n+1-j})/(a₀ +
+        Δt̄/λ_k), so ūⁿ⁺¹ = J₀p̄ⁿ⁺¹ + Σ_k q_kⁿ⁺¹ is linear in p̄ⁿ⁺¹ (module docstring)."""
+        j0, jk, lam = self.compliance()
+        a0, dt = step.weights[0], step.dt
+        denom = a0 + dt / lam
+        creep = dt * jk / lam / denom
+        # (each sum in this order: the compiler's fused multiply-adds follow it, and the
+        # rounding fixes the step sequence)
+        _, a1, a2, a3 = step.weights
+        memory, load = step.history.memory, step.history.elastic_load
+        history_memory = -a1 * memory[0] - a2 * memory[1]
+        if a3 is not None:
+            history_memory = history_memory - a3 * memory[2]
+        memory_known = history_memory / denom[:, None]
+        known = a0 * jnp.sum(memory_known, axis=0) + a1 * load[0] + a2 * load[1]
+        if a3 is not None:
+            known = known + a3 * load[2]
+
+        def loads(p):
+            memory = memory_known + creep[:, None] * p[None, :]
+            return memory, j0 * p + jnp.sum(memory, axis=0)
+
+        return StepLoads(j0 + jnp.sum(creep), known, loads)
 
     def compliance_at(self, t):
         """J(t̄) E*∞ = J₀ + Σ J_k (1 - e^{-t̄/λ_k})."""

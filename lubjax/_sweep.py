@@ -24,9 +24,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _compiler, _sharding
+from ._controller import DONE
 from ._indenter import RampHold, SampledTravel
+from ._rollout import evaluate, rollout
 from ._solve import BETA_RANGE, Z0_RANGE, Settings, _check_x64, make_plan
-from ._stepper import DONE, evaluate, rollout
 from ._threads import single_threaded_blas
 
 

@@ -103,20 +103,6 @@ def test_time_error_converges_at_the_observed_order_in_rtol():
         assert abs(slope - expected) < 0.15, (order, slope, errs)
 
 
-@pytest.mark.parametrize("degree", [1, 2, 3])
-def test_interpolant_reproduces_polynomials_of_its_degree(degree):
-    """The dense output of a step of order p (backward Euler, BDF2, BDF3) is the polynomial of
-    degree p through the step's levels: exact for polynomials of that degree, not of the next."""
-    from lubjax._stepper import _interpolate
-
-    times = (0.1, 0.35, 0.5, 0.9)
-    query = np.linspace(0.5, 0.9, 7)
-    for power, exact in [(degree, True), (degree + 1, False)]:
-        values = tuple(t**power for t in times)
-        got = np.asarray(_interpolate(query, times, values, degree, np))
-        assert np.allclose(got, query**power, rtol=1e-13, atol=1e-15) == exact, (power, got)
-
-
 def test_bdf3_output_between_steps_is_as_accurate_as_at_them():
     """BDF3 steps are read by a cubic through four levels (its own dense output): between the
     steps the force is as accurate as at them. Measured, rtol 1e-6: midpoints 1.005× the error

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import lubjax  # enables float64
-from lubjax import _stepper
+from lubjax import _discretisation
 
 
 def default_t_out(t_end: float = 5.0, every: float = 0.05) -> np.ndarray:
@@ -106,7 +106,7 @@ def make_info(*, wall_s, compile_s=0.0, force=None, film_min=None, converged=Tru
     return info
 
 
-# --- the shared FV operators (JAX), identical formulas to lubjax._stepper --------------------
+# --- the shared FV operators (JAX), identical formulas to lubjax._discretisation ----------
 
 def fv_mesh(kind: str = "graded", dr: float = 0.02, length: float = 100.0, r_fine: float = 1.6,
             growth: float = 1.04):
@@ -121,11 +121,11 @@ def film(disc, z, p):
 
 
 def face_conductance(disc, h, z):
-    """lubjax's face conductances g ≈ r̄h̄³/Δr̄ (``lubjax._stepper.face_conductance``) of the film
-    h at the nodes, gap z (the midpoint film as lubjax takes it)."""
+    """lubjax's face conductances g ≈ r̄h̄³/Δr̄ (``lubjax._discretisation.face_conductance``) of
+    the film h at the nodes, gap z (the midpoint film as lubjax takes it)."""
     elastic = h - z - 0.5 * disc.r**2
     h_mid = z + 0.5 * disc.face_r**2 + 0.5 * (elastic[:-1] + elastic[1:])
-    return _stepper.face_conductance(disc, h, h_mid)
+    return _discretisation.face_conductance(disc, h, h_mid)
 
 
 def flux_divergence(disc, beta, h, z, p):

@@ -1,0 +1,183 @@
+"""The controller on its own (lubjax/_controller.py): the error norm, acceptance, the PI
+factor's limits, breakpoint landing, restarts, collapse, and the status messages."""
+
+import jax.numpy as jnp
+import pytest
+
+import lubjax
+from lubjax import _controller as ctrl
+from lubjax._stepper import Estimate, Level
+
+TOL = ctrl.Tolerance(rtol=1e-4, atol=1e-9)
+
+
+def _controller(since_restart=5, error_prev=0.5, last_rejected=False, dt_next=0.1):
+    return ctrl.ControllerState(jnp.asarray(dt_next), jnp.asarray(error_prev),
+                                jnp.asarray(last_rejected), jnp.asarray(since_restart))
+
+
+def _adapt(error, valid=True, controller=None, t=1.0, dt=0.1, lands=False, t_end=10.0,
+           first_step=1e-7):
+    controller = _controller() if controller is None else controller
+    return ctrl.adapt(jnp.asarray(error), jnp.asarray(valid), controller, 2, jnp.asarray(t),
+                      jnp.asarray(t + dt), jnp.asarray(lands), t_end,
+                      jnp.asarray(ctrl.RUNNING), first_step)
+
+
+def test_accepts_within_tolerance_and_rejects_beyond_it():
+    assert bool(_adapt(0.99).accept) and not bool(_adapt(1.01).accept)
+    d = _adapt(1.01)
+    assert bool(d.rejected.last_rejected) and float(d.rejected.dt_next) < 0.1
+    # the PI memory and the segment count do not move on a rejection
+    assert float(d.rejected.error_prev) == 0.5 and int(d.rejected.since_restart) == 5
+
+
+def test_rejects_what_is_not_admissible_whatever_its_error():
+    d = _adapt(1e-6, valid=False)
+    assert not bool(d.accept)
+    assert float(d.rejected.dt_next) == pytest.approx(0.1 * ctrl.INVALID_SHRINK)
+    d = _adapt(float("nan"))
+    assert not bool(d.accept)
+
+
+@pytest.mark.parametrize("error", [1e-12, 1e-6, 1e-2, 0.5, 1.0])
+def test_grows_no_faster_than_its_limit(error):
+    assert float(_adapt(error).accepted.dt_next) <= 0.1 * ctrl.MAX_GROWTH * (1 + 1e-15)
+    # straight after a rejection: no growth at all
+    after = _adapt(error, controller=_controller(last_rejected=True))
+    assert float(after.accepted.dt_next) <= 0.1 * (1 + 1e-15)
+
+
+def test_shrinks_a_rejected_step_within_its_limits():
+    for error in (1.5, 10.0, 1e6):
+        factor = float(_adapt(error).rejected.dt_next) / 0.1
+        assert ctrl.MIN_SHRINK - 1e-15 <= factor <= ctrl.SAFETY + 1e-15
+
+
+def test_a_segments_first_step_has_no_estimate():
+    d = _adapt(50.0, controller=_controller(since_restart=0))
+    assert bool(d.accept)
+    assert float(d.accepted.dt_next) == pytest.approx(0.1 * ctrl.MAX_GROWTH)
+
+
+def test_lands_on_breakpoints_exactly_and_restarts_there():
+    breakpoints = jnp.asarray([0.5, 2.0])
+    t_new, lands = ctrl.propose(jnp.asarray(0.3), jnp.asarray(1.0), breakpoints, 10.0)
+    assert float(t_new) == 0.5 and bool(lands)
+    t_new, lands = ctrl.propose(jnp.asarray(0.3), jnp.asarray(0.1), breakpoints, 10.0)
+    assert float(t_new) == pytest.approx(0.4) and not bool(lands)
+    t_new, lands = ctrl.propose(jnp.asarray(2.5), jnp.asarray(100.0), breakpoints, 10.0)
+    assert float(t_new) == 10.0 and bool(lands)  # t_end is landed on too
+    d = _adapt(0.5, lands=True)
+    assert float(d.accepted.dt_next) == 1e-7 and int(d.accepted.since_restart) == 0
+    assert int(d.status_accepted) == ctrl.RUNNING
+    d = _adapt(0.5, t=9.9, dt=0.1, lands=True)
+    assert int(d.status_accepted) == ctrl.DONE
+
+
+def test_reports_collapse():
+    d = _adapt(5.0, dt=1e-20, t=1.0)
+    assert not bool(d.accept) and int(d.status_rejected) == ctrl.STEP_TOO_SMALL
+    assert int(_adapt(5.0).status_rejected) == ctrl.RUNNING
+
+
+def test_stop_reasons_name_the_cause():
+    assert ctrl.stop_reason(ctrl.DONE, 100) == ""
+    assert "collapsed" in ctrl.stop_reason(ctrl.STEP_TOO_SMALL, 100)
+    assert "max_steps = 123" in ctrl.stop_reason(ctrl.RUNNING, 123)
+
+
+def test_relax_reports_the_controllers_reason():
+    res = lubjax.relax(100.0, 0.5, 5.0, settings=lubjax.Settings(
+        max_steps=30, error_estimate=False, dr=0.1, length=50.0, mesh_growth=1.2,
+        contact_radius=None), check="flag")
+    assert not res.finished
+    assert res.stop_reason == ctrl.stop_reason(ctrl.RUNNING, 30)
+    assert any(res.stop_reason in p for p in res.problems())
+
+
+@pytest.mark.parametrize("since, max_order, expected", [
+    (0, 2, 1), (1, 2, 1), (2, 2, 2), (3, 2, 2), (2, 3, 2), (3, 3, 3), (5, 1, 1),
+])
+def test_chooses_the_order_of_the_segment(since, max_order, expected):
+    peaks = ctrl.Peaks(jnp.asarray(1.0), jnp.asarray(0.0), jnp.asarray(0.0))
+    order = ctrl.choose_order(_controller(since_restart=since), jnp.asarray(0.5), peaks,
+                              max_order)
+    assert int(order) == expected
+
+
+def test_a_decayed_tail_steps_by_backward_euler():
+    peaks = ctrl.Peaks(jnp.asarray(1.0), jnp.asarray(0.0), jnp.asarray(0.0))
+    tail = jnp.asarray(ctrl.BACKWARD_EULER_FORCE / 2)
+    assert int(ctrl.choose_order(_controller(), tail, peaks, 3)) == 1
+    # a force still emerging from zero (never above the threshold) keeps BDF2
+    young = ctrl.Peaks(jnp.asarray(ctrl.BACKWARD_EULER_FORCE / 4), *peaks[1:])
+    assert int(ctrl.choose_order(_controller(), tail, young, 2)) == 2
+
+
+class _Drive:
+    prescribes_gap, prescribes_force, inertia, force_nonnegative = True, False, False, True
+
+
+def _level(force, film=1.0, gap=0.5, velocity=0.0):
+    n = 4
+    return Level(dt=jnp.asarray(0.1), pressure=jnp.ones(n), elastic_load=jnp.ones(n),
+                 memory=jnp.zeros((0, n)), film=jnp.full(n, film), gap=jnp.asarray(gap),
+                 gap_step=jnp.asarray(0.0), velocity=jnp.asarray(velocity),
+                 force=jnp.asarray(force))
+
+
+def _ratio(force_error, force, peak, drive=_Drive, gap_error=0.0, gap=0.5, excursion=0.0):
+    est = Estimate(film=jnp.zeros(4), force=jnp.asarray(force_error),
+                   gap=jnp.asarray(gap_error), velocity=jnp.asarray(0.0))
+    peaks = ctrl.Peaks(jnp.asarray(peak), jnp.asarray(0.0), jnp.asarray(excursion))
+    return float(ctrl.error_ratio(est, _level(force, gap=gap), _level(force), peaks, TOL,
+                                  drive, jnp.asarray(0.5)))
+
+
+def test_error_norm_holds_the_force_relative_to_itself():
+    assert _ratio(0.5e-4, 1.0, 1.0) == pytest.approx(0.5, rel=1e-6)
+
+
+def test_error_norm_tightens_in_a_decayed_tail():
+    """Two decades below the peak the relative tolerance is rtol/(1 + 3·2)."""
+    at_peak = _ratio(1e-6, 1e-2, 1e-2)
+    in_tail = _ratio(1e-6, 1e-2, 1.0)
+    # (to the force's absolute floor FORCE_ATOL, 1e-6 of these scales)
+    assert in_tail == pytest.approx(at_peak * (1 + ctrl.TAIL_TIGHTENING * 2), rel=1e-4)
+
+
+def test_error_norm_ignores_a_prescribed_force_and_floors_a_tiny_one():
+    class Load(_Drive):
+        prescribes_force = True
+
+    assert _ratio(1.0, 1.0, 1.0, drive=Load()) == 0.0
+    # far below force_floor × peak the floor sets the scale, not the force itself
+    floor = TOL.force_floor * 1.0
+    assert _ratio(1e-20, 1e-15, 1.0) < _ratio(1e-20, 1e-15, 1e-15)
+    assert _ratio(TOL.rtol * floor, 1e-15, 1.0) < 1.0
+
+
+def test_error_norm_holds_a_free_gap_relative_to_its_excursion():
+    class Free(_Drive):
+        prescribes_gap = False
+
+    # excursion so far 0.1: the gap's error is held to rtol × 0.1 (+ atol)
+    r = _ratio(0.0, 1.0, 1.0, drive=Free(), gap_error=0.5e-5, gap=0.45, excursion=0.1)
+    assert r == pytest.approx(0.5e-5 / (TOL.atol + TOL.rtol * 0.1), rel=1e-9)
+    # a prescribed gap is not the solver's error
+    assert _ratio(0.0, 1.0, 1.0, gap_error=1.0) == 0.0
+
+
+def test_admissible_refuses_a_negative_film_and_force():
+    peaks = ctrl.Peaks(jnp.asarray(1.0), jnp.asarray(0.0), jnp.asarray(0.0))
+    assert bool(ctrl.admissible(_level(0.5), peaks, _Drive()))
+    assert not bool(ctrl.admissible(_level(0.5, film=-1e-9), peaks, _Drive()))
+    assert not bool(ctrl.admissible(_level(-1e-3), peaks, _Drive()))
+    nan_pressure = _level(0.5)._replace(pressure=jnp.full(4, jnp.nan))
+    assert not bool(ctrl.admissible(nan_pressure, peaks, _Drive()))
+    # a negative force is physics where the drive can pull (no monotone approach)
+    class Pull(_Drive):
+        force_nonnegative = False
+
+    assert bool(ctrl.admissible(_level(-1e-3), peaks, Pull()))
