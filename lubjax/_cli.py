@@ -102,9 +102,9 @@ PROGRESS_AFTER_S = 2.0
 PROGRESS_EVERY_S = 0.5
 #: (function of lubjax.relax, what it is doing): the innermost match names the phase.
 _PHASES = (
-    ("_compiled_rollouts", "compiling the solver"),
+    ("_compiled_rollouts", "compiling the solver (or loading it from the cache)"),
     ("evaluate_host", "estimating the error"),
-    ("relax", "running the solver (then the coarse runs of its error estimate)"),
+    ("relax", "running the solver and its error estimate"),
 )
 
 

@@ -326,7 +326,8 @@ def test_relax_progress_line_only_on_a_terminal(monkeypatch, capsys):
     monkeypatch.setattr("sys.stderr", terminal)
     assert lcli.main(argv) == 0
     err = terminal.getvalue()
-    assert "relax: compiling the solver ..." in err and "relax: running the solver" in err
+    assert "relax: compiling the solver (or loading it from the cache) ..." in err
+    assert "relax: running the solver and its error estimate ..." in err
     assert err.index("compiling") < err.index("running") and err.endswith("\r\x1b[K")
     assert "[   0.0 s]" in err
 
