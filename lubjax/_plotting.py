@@ -56,6 +56,7 @@ def plot_result(res, path: str, test=None, substrate: str | None = None) -> None
         a.set_xlabel(t_label)
         if t[-1] > 20:
             a.set_xscale("symlog", linthresh=ts)
+            a.set_xlim(0, t[-1] * ts)
     sel = res.r <= 2.5
     for tp, p, h in zip(res.profile_times, res.pressure, res.film):
         label = f"t = {tp * ts:.3g} s" if si else f"t̄ = {tp:g}"
