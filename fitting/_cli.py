@@ -79,6 +79,15 @@ EXAMPLES = (
 )
 
 
+def _epilog() -> str:
+    """The exit statuses, the trace format, then runnable examples (the end of --help)."""
+    exits = EXIT_EPILOG.format(failed="a fit did not converge (its results are still "
+                               "written),\n     or an output could not be written")
+    examples = "\n".join(f"  {example_lines(line)}" for line in EXAMPLES)
+    return (f"{exits}{TRACE_FORMAT}\n\nexamples (data/ of the lubjax sources holds these "
+            f"traces):\n{examples}")
+
+
 def summary_line(res: FitResult) -> str:
     status = "converged" if res.converged else "NOT CONVERGED"
     if not res.identifiable:
@@ -200,12 +209,7 @@ def build_parser() -> Parser:
         description="Fit the substrate modulus E*, film viscosity eta and initial gap z0 (and, "
         "for a viscoelastic solid, E0/Einf and tau) to tribometer traces (CSV files: see "
         "below) with the lubjax soft-EHL solver.",
-        epilog=EXIT_EPILOG.format(
-            failed="a fit did not converge (its results are still written),\n"
-            "     or an output could not be written"
-        ) + TRACE_FORMAT + "\n\nexamples (data/ of the lubjax sources holds these traces):\n"
-        + "\n".join(
-            f"  {example_lines(line)}" for line in EXAMPLES),
+        epilog=_epilog(),
     )
     p.add_argument("traces", nargs="+", help="trace CSV file(s)")
     p.add_argument("--out", help="JSON output (one object, or a list for several traces)")

@@ -41,30 +41,30 @@ DESCRIPTION = (
     "Also available as: python -m lubjax"
 )
 EPILOG = EXIT_EPILOG.format(failed="solver error, or an output could not be written")
-MATERIAL = "--E-star 3.92e6 --viscosity 100 --radius 2e-3"
-BOUNCE = "--E-star 1e6 --viscosity 0.01 --radius 2e-3 --density 7800 --speed 0.05 --gap 50e-6"
-SI_RELAX = f"{MATERIAL} --speed 1e-4 --indent 140e-6 --gap 140e-6"
-CREEP = f"{MATERIAL} --load 0.03 --ramp-time 1 --hold 29 --gap 140e-6"
+_MATERIAL = "--E-star 3.92e6 --viscosity 100 --radius 2e-3"
+_BOUNCE = "--E-star 1e6 --viscosity 0.01 --radius 2e-3 --density 7800 --speed 0.05 --gap 50e-6"
+_SI_RELAX = f"{_MATERIAL} --speed 1e-4 --indent 140e-6 --gap 140e-6"
+_CREEP = f"{_MATERIAL} --load 0.03 --ramp-time 1 --hold 29 --gap 140e-6"
 #: Runnable examples ending each command's --help (tests/test_cli_output.py runs them).
 EXAMPLES = {
     "lubjax": [
         "lubjax relax --beta 100 --z0 0.5 --plot relax.png",
-        f"lubjax creep {CREEP} --plot creep.png",
-        f"lubjax bounce {BOUNCE} --plot bounce.png",
+        f"lubjax creep {_CREEP} --plot creep.png",
+        f"lubjax bounce {_BOUNCE} --plot bounce.png",
     ],
     "relax": [
         "lubjax relax --beta 100 --z0 0.5 --t-end 5 --out relax.json",
-        f"lubjax relax {SI_RELAX} --t-end 20 --plot relax.png",
-        f"lubjax relax {SI_RELAX} --substrate layer --thickness 5e-3 --plot layer.png",
+        f"lubjax relax {_SI_RELAX} --t-end 20 --plot relax.png",
+        f"lubjax relax {_SI_RELAX} --substrate layer --thickness 5e-3 --plot layer.png",
     ],
     "creep": [
-        f"lubjax creep {CREEP} --plot creep.png",
-        f"lubjax creep {CREEP} --substrate viscoelastic --prony-g 0.5 --prony-tau 0.5 "
+        f"lubjax creep {_CREEP} --plot creep.png",
+        f"lubjax creep {_CREEP} --substrate viscoelastic --prony-g 0.5 --prony-tau 0.5 "
         "--out creep.json",
     ],
     "bounce": [
-        f"lubjax bounce {BOUNCE} --plot bounce.png",
-        f"lubjax bounce {BOUNCE} --substrate layer --thickness 1e-3 --out bounce.json",
+        f"lubjax bounce {_BOUNCE} --plot bounce.png",
+        f"lubjax bounce {_BOUNCE} --substrate layer --thickness 1e-3 --out bounce.json",
     ],
 }
 
