@@ -336,7 +336,7 @@ def _run(args) -> int:
         if not args.no_cache:  # a repeated call loads the compiled solver instead of compiling
             cached = enable_compilation_cache()
         progress(f"read {len(traces)} trace(s); " + (
-            "preparing the solver (compiling it, or loading it from the compilation cache) ..."
+            "compiling the solver, or loading it from the cache ..."
             if cached else "compiling the solver ..."))
         kw = dict(shared=shared, method=args.method, max_iter=args.max_iter, noise=args.noise,
                   progress=progress)

@@ -174,7 +174,7 @@ def test_fit_progress_in_a_log_has_no_control_characters_nor_a_cold_start_claim(
     assert not any(c in err for c in CONTROL), repr(err)
     lines = err.splitlines()
     assert len(lines) == 4 and lines[-1].endswith("iteration 2, chi2/2 1, 0/1 done")
-    assert "first call only" not in err and "compiling it, or loading it" in err
+    assert "first call only" not in err and "or loading it from the cache" in err
 
 
 def test_fit_progress_on_a_terminal_redraws_one_line(monkeypatch, capsys):
