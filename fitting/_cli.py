@@ -15,11 +15,13 @@ import csv
 import dataclasses
 import json
 import os
+import shutil
 import sys
 import time
 
 import numpy as np
 
+from lubjax._cli import example_lines
 from lubjax._files import (
     EXIT_EPILOG,
     EXIT_FAILED,
@@ -47,6 +49,43 @@ from ._report import fit_report, result_to_dict, short_value
 
 PROG = "lubjax-fit"
 SHAREABLE = ("E_star", "viscosity", "z0", "stiffening", "relaxation_time")
+TRACE_FORMAT = """
+
+trace files: CSV (UTF-8), '# key: value' lines, a header row, then numbers:
+  # radius_m: 2.0e-3
+  time_s,displacement_m,force_N
+  0.0,0.0,0.0012
+  ...
+metadata lines:
+  # radius_m:         the sphere radius R [m] (required; or the reduced radius)
+  # poisson_ratio:    optional: the JSON then also gives E = E*(1 - nu^2)
+  # drive:            optional: travel (default), spring or force (--drive)
+  # stiffness_N_m:    optional: the load cell's stiffness k [N/m] (spring)
+  other keys are kept in the JSON; '# text' without a colon is a comment
+columns (any order, no others):
+  time_s              time [s], strictly increasing
+  displacement_m      the stage's travel toward the substrate since the first
+                      row [m] (under --drive force: the sphere's approach)
+  force_N             the normal force [N], positive when pushing back (under
+                      --drive force: the prescribed load)
+The full description: the trace file format page of the documentation,
+docs/formats.md."""
+#: Runnable examples ending --help (the data/ folder of the lubjax sources holds these traces).
+EXAMPLES = (
+    "lubjax-fit data/paper_dc140.csv --out fit.json --plot fit.png",
+    "lubjax-fit data/paper_dc126.csv data/paper_dc140.csv data/paper_dc154.csv "
+    "--shared E_star,viscosity --out joint.json --report joint.txt",
+    "lubjax-fit data/visco_dc140.csv --compare --rtol 1e-3 --report compare.txt",
+)
+
+
+def _epilog() -> str:
+    """The exit statuses, the trace format, then runnable examples (the end of --help)."""
+    exits = EXIT_EPILOG.format(failed="a fit did not converge (its results are still "
+                               "written),\n     or an output could not be written")
+    examples = "\n".join(f"  {example_lines(line)}" for line in EXAMPLES)
+    return (f"{exits}{TRACE_FORMAT}\n\nexamples (data/ of the lubjax sources holds these "
+            f"traces):\n{examples}")
 
 
 def summary_line(res: FitResult) -> str:
@@ -168,12 +207,9 @@ def build_parser() -> Parser:
     p = Parser(
         prog=PROG,
         description="Fit the substrate modulus E*, film viscosity eta and initial gap z0 (and, "
-        "for a viscoelastic solid, E0/Einf and tau) to tribometer traces (CSV: see "
-        "data/README.md) with the lubjax soft-EHL solver.",
-        epilog=EXIT_EPILOG.format(
-            failed="a fit did not converge (its results are still written),\n"
-            "     or an output could not be written"
-        ),
+        "for a viscoelastic solid, E0/Einf and tau) to tribometer traces (CSV files: see "
+        "below) with the lubjax soft-EHL solver.",
+        epilog=_epilog(),
     )
     p.add_argument("traces", nargs="+", help="trace CSV file(s)")
     p.add_argument("--out", help="JSON output (one object, or a list for several traces)")
@@ -274,23 +310,34 @@ def _run(args) -> int:
     check_outputs(outputs, inputs=args.traces, input_label="input trace")
     start = time.perf_counter()
     shown = False
+    tty = sys.stderr.isatty()
 
     def progress(msg):
+        # A terminal gets one line redrawn in place; a redirected log one plain line per
+        # message, with no control characters.
         nonlocal shown
-        if not args.quiet:
+        if args.quiet:
+            return
+        line = f"[{time.perf_counter() - start:6.1f} s] {msg}"
+        if tty:
             shown = True
-            elapsed = time.perf_counter() - start
-            sys.stderr.write(f"\r\033[K[{elapsed:6.1f} s] {msg}"[:200])
-            sys.stderr.flush()
+            width = shutil.get_terminal_size().columns - 1
+            sys.stderr.write("\r\033[K" + line[:width])
+        else:
+            sys.stderr.write(line + "\n")
+        sys.stderr.flush()
 
     comparison = None
     try:
         traces = [read_trace(path) for path in args.traces]
         spec = ModelSpec(drive=_common_drive(traces, args.drive), **spec_kw)
         prepare_outputs(outputs)  # creates missing folders: only once the inputs are good
+        cached = None
         if not args.no_cache:  # a repeated call loads the compiled solver instead of compiling
-            enable_compilation_cache()
-        progress(f"read {len(traces)} trace(s); compiling the solver (first call only) ...")
+            cached = enable_compilation_cache()
+        progress(f"read {len(traces)} trace(s); " + (
+            "compiling the solver, or loading it from the cache ..."
+            if cached else "compiling the solver ..."))
         kw = dict(shared=shared, method=args.method, max_iter=args.max_iter, noise=args.noise,
                   progress=progress)
         if settings is not None:

@@ -10,6 +10,9 @@ and
   classical χ² law does not hold there: Self & Liang 1987, Davies 1987);
 * AIC = 2k - 2ℓ and BIC = k ln n - 2ℓ (k: fitted parameters + the noise scale).
 
+Models with the same number of parameters (a layer of known thickness against the half-space)
+are not nested: their ratio gets no p-value; the decision below is the same.
+
 Decision: the richer model only when ΔBIC = BIC_simple - BIC_rich > ``BIC_MARGIN`` (10: "very
 strong" evidence on Kass & Raftery's scale); BIC, unlike AIC, does not pick the larger model
 more often as n grows when the smaller one is true. Where the residuals are correlated (AR(1)
@@ -52,28 +55,46 @@ def compare(simple_results, rich_results, simple_label="simple", rich_label="ric
     dk = b["k"] - a["k"]
     from scipy.stats import chi2  # here, not at import: scipy.stats costs a fit 0.5 s to load
 
-    p = float(chi2.sf(max(lr, 0.0), dk)) if dk > 0 else float("nan")
+    nested = dk > 0
+    # Same parameter count (a layer against the half-space): not nested, so no χ² law for the
+    # ratio and nothing "extra"; the information criteria still compare them.
+    p = float(chi2.sf(max(lr, 0.0), dk)) if nested else None
     d_aic, d_bic = a["aic"] - b["aic"], a["bic"] - b["bic"]
     rich_ok = all(r.converged for r in rich_results)
     use_rich = d_bic > BIC_MARGIN
     choice = rich_label if use_rich else simple_label
-    why = (f"delta BIC = {d_bic:.1f} > {BIC_MARGIN:g}: the data ask for the extra parameters"
-           if use_rich else
-           f"delta BIC = {d_bic:.1f} <= {BIC_MARGIN:g}: the extra parameters are not needed")
+    if nested:
+        verdict = ("the data ask for the extra parameters" if use_rich
+                   else "the extra parameters are not needed")
+        ratio = (f"likelihood ratio {lr:.2f} on {dk} extra parameter(s), nominal p = {p:.3g} "
+                 "(boundary: a guide only)")
+    else:
+        verdict = (f"the data favour it over the {simple_label}" if use_rich
+                   else f"not enough evidence for the {rich_label} over the {simple_label}")
+        ratio = (f"likelihood ratio {lr:.2f} between models with the same number of "
+                 "parameters (not nested: no p-value)")
+    relation = ">" if use_rich else "<="
     report = [
         f"{simple_label}: log-likelihood {a['log_likelihood']:.2f}, k = {a['k']}, "
         f"AIC {a['aic']:.1f}, BIC {a['bic']:.1f}",
         f"{rich_label}: log-likelihood {b['log_likelihood']:.2f}, k = {b['k']}, "
         f"AIC {b['aic']:.1f}, BIC {b['bic']:.1f}"
         + ("" if rich_ok else " (fit not converged: its likelihood is a lower bound)"),
-        f"likelihood ratio {lr:.2f} on {dk} extra parameter(s), nominal p = {p:.3g} "
-        "(boundary: a guide only)",
-        f"decision: {choice} ({why})",
+        ratio,
+        f"decision: {choice} (delta BIC = {d_bic:.1f} {relation} {BIC_MARGIN:g}: {verdict})",
     ]
     return dict(simple=simple_label, rich=rich_label, likelihood_ratio=lr, extra_parameters=dk,
                 p_value_nominal=p, delta_aic=d_aic, delta_bic=d_bic, bic_margin=BIC_MARGIN,
                 choice=choice, rich_converged=rich_ok, report=report,
                 simple_information=a, rich_information=b)
+
+
+def _naming(progress, spec):
+    """``progress`` with each message prefixed by the model it comes from (two fits run)."""
+    if progress is None:
+        return None
+    label = spec.substrate_label()
+    return lambda message: progress(f"{label}: {message}")
 
 
 def compare_models(traces, *, simple=None, rich=None, tau_start=1.0, **fit_kwargs):
@@ -94,15 +115,18 @@ def compare_models(traces, *, simple=None, rich=None, tau_start=1.0, **fit_kwarg
         simple = _model.ModelSpec(drive=drive, fit_offset=fit_kwargs.pop("fit_offset", True),
                                   layer=fit_kwargs.pop("layer", None))
     rich = dataclasses.replace(simple, viscoelastic=True) if rich is None else rich
-    base = fit_traces(traces, spec=simple, **fit_kwargs)
+    progress = fit_kwargs.pop("progress", None)
+    base = fit_traces(traces, spec=simple, progress=_naming(progress, simple), **fit_kwargs)
     starts = []
     for r in base:
         values = {n: r.values.get(n) for n in rich.names}
+        note = f"from the {simple.substrate_label()} fit"
         if rich.viscoelastic and not simple.viscoelastic:
             values.update(stiffening=1.2, relaxation_time=tau_start * r.scales.time_scale)
-        starts.append(Start(values, (f"from the {simple.substrate_label()} fit; E0/Einf = 1.2, "
-                                     f"tau = {tau_start:g} t_c",)))
-    richer = fit_traces(traces, spec=rich, starts=starts, **fit_kwargs)
+            note += f"; E0/Einf = 1.2, tau = {tau_start:g} t_c"
+        starts.append(Start(values, (note,)))
+    richer = fit_traces(traces, spec=rich, starts=starts, progress=_naming(progress, rich),
+                        **fit_kwargs)
     comparison = compare(base, richer, simple.substrate_label(), rich.substrate_label())
     for r in base + richer:
         r.stats["comparison"] = comparison

@@ -715,7 +715,9 @@ def fit_traces(
                                    layout.labels[k], noise=noise,
                                    solver_error=None if errors is None else errors[k])
         for j, t in enumerate(members):
-            results.append(_trace_result(traces[t], spec, scales[t], starts[t], layout, t, o,
+            joint = shared if len(members) > 1 else ()
+            start = _start_used(starts[t], spec, layout, t, x0s[k], scales[t], joint)
+            results.append(_trace_result(traces[t], spec, scales[t], start, layout, t, o,
                                          summary, j, members, names, shared, method,
                                          evaluate.runs, wall, model[t, : traces[t].time.size]))
     return results
@@ -814,6 +816,21 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
         start=start, flags=tuple(flags), time=trace.time, data=_channel(trace, spec),
         model=model, metadata=dict(trace.metadata),
     )
+
+
+def _start_used(start, spec, layout, t, x0, scales, shared) -> Start:
+    """Trace t's start with each shared parameter at the value the joint fit started from: one
+    for the whole group (the mean of the traces' own starts on the fit's log scale)."""
+    if not shared:
+        return start
+    theta = layout.base[t] + layout.M[t] @ x0
+    values = dict(start.values)
+    for n in shared:
+        i = spec.names.index(n)
+        values[n] = _model.to_physical(n, float(theta[i]), scales.response_unit)[0]
+    note = (f"shared {', '.join(shared)}: one start for all traces, the mean of their own "
+            "starts on a log scale")
+    return Start(values, (*start.notes, note))
 
 
 def _channel(trace, spec):

@@ -14,9 +14,12 @@ _UNITS = {
     "E_star": ("E_star_Pa", "MPa", 1e6),
     "viscosity": ("viscosity_Pa_s", "Pa s", 1.0),
     "z0": ("z0_m", "um", 1e-6),
-    "stiffening": ("stiffening", "E0/Einf", 1.0),
+    "stiffening": ("stiffening", "", 1.0),  # E0/Einf: a ratio, no unit
     "relaxation_time": ("relaxation_time_s", "s", 1.0),
 }
+#: Parameters whose value can be near or at zero: their error is shown absolute only (a relative
+#: error of an offset near zero is thousands of percent and says nothing).
+NEAR_ZERO = ("offset",)
 _TRUE_KEYS = {
     "E_star": "true_E_star_Pa",
     "viscosity": "true_viscosity_Pa_s",
@@ -116,7 +119,7 @@ def result_to_dict(res: FitResult) -> dict:
 def _value_line(res, n):
     key, unit, scale = units(res, n)
     v, e = res.values[n] / scale, res.stderr[n] / scale
-    rel = f"({100 * e / abs(v):.2f}%)" if v else ""
+    rel = f"({100 * e / abs(v):.2f}%)" if v and n not in NEAR_ZERO else ""
     tag = " (shared)" if n in res.shared else ""
     start = res.start.values[n] / scale
     line = (f"    {n:<16s} = {v:<11.6g} +/- {e:<10.3g} {rel:<9s} {unit:<8s} "
@@ -156,7 +159,8 @@ def fit_report(res: FitResult, min_correl: float = 0.1) -> str:
     lines.append("[[Variables]]")
     for n in names:
         lines.append(_value_line(res, n))
-    lines.append(f"    (beta = {res.beta:.5g}, z0/dc = {res.z0_over_dc:.5g}, d_c = "
+    ratio = "stiffening = E0/Einf, " if "stiffening" in names else ""
+    lines.append(f"    ({ratio}beta = {res.beta:.5g}, z0/dc = {res.z0_over_dc:.5g}, d_c = "
                  f"{res.scales.indent * 1e6:.5g} um, t_c = {res.scales.time_scale:.4g} s)")
     parts = st.get("error_parts", {})
     if parts:
@@ -192,4 +196,5 @@ def fit_report(res: FitResult, min_correl: float = 0.1) -> str:
 def short_value(res: FitResult, n: str) -> str:
     _, unit, scale = units(res, n)
     v, e = res.values[n] / scale, res.stderr[n] / scale
-    return f"{v:.4g} ± {e:.2g} {unit}" if not math.isnan(e) else f"{v:.4g} {unit}"
+    text = f"{v:.4g} ± {e:.2g}" if not math.isnan(e) else f"{v:.4g}"
+    return f"{text} {unit}" if unit else text

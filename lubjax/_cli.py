@@ -7,11 +7,15 @@ traceback. Outputs are checked before the run and written atomically (see ``_fil
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
+import shutil
 import sys
 import textwrap
+import threading
+import time
 
 import numpy as np
 
@@ -37,8 +41,119 @@ DESCRIPTION = (
     "Also available as: python -m lubjax"
 )
 EPILOG = EXIT_EPILOG.format(failed="solver error, or an output could not be written")
+_MATERIAL = "--E-star 3.92e6 --viscosity 100 --radius 2e-3"
+_BOUNCE = "--E-star 1e6 --viscosity 0.01 --radius 2e-3 --density 7800 --speed 0.05 --gap 50e-6"
+_SI_RELAX = f"{_MATERIAL} --speed 1e-4 --indent 140e-6 --gap 140e-6"
+_CREEP = f"{_MATERIAL} --load 0.03 --ramp-time 1 --hold 29 --gap 140e-6"
+#: Runnable examples ending each command's --help (tests/test_cli_output.py runs them).
+EXAMPLES = {
+    "lubjax": [
+        "lubjax relax --beta 100 --z0 0.5 --plot relax.png",
+        f"lubjax creep {_CREEP} --plot creep.png",
+        f"lubjax bounce {_BOUNCE} --plot bounce.png",
+    ],
+    "relax": [
+        "lubjax relax --beta 100 --z0 0.5 --t-end 5 --out relax.json",
+        f"lubjax relax {_SI_RELAX} --t-end 20 --plot relax.png",
+        f"lubjax relax {_SI_RELAX} --substrate layer --thickness 5e-3 --plot layer.png",
+    ],
+    "creep": [
+        f"lubjax creep {_CREEP} --plot creep.png",
+        f"lubjax creep {_CREEP} --substrate viscoelastic --prony-g 0.5 --prony-tau 0.5 "
+        "--out creep.json",
+    ],
+    "bounce": [
+        f"lubjax bounce {_BOUNCE} --plot bounce.png",
+        f"lubjax bounce {_BOUNCE} --substrate layer --thickness 1e-3 --out bounce.json",
+    ],
+}
+
+
+def example_lines(command: str, width: int = 76) -> str:
+    """``command`` as shell lines of at most ``width`` columns (where an option and its value
+    fit), continued with backslashes, never splitting an option from its value."""
+    groups = []
+    for word in command.split():
+        if word.startswith("--") or not groups:
+            groups.append(word)
+        else:
+            groups[-1] += " " + word
+    lines = [groups[0]]
+    for group in groups[1:]:
+        if len(lines[-1]) + 1 + len(group) + 2 > width - 6:
+            lines.append(group)
+        else:
+            lines[-1] += " " + group
+    return " \\\n      ".join(lines)
+
+
+def _epilog(command: str) -> str:
+    """The exit statuses, then runnable examples (the last thing --help shows)."""
+    examples = "\n".join(f"  {example_lines(line)}" for line in EXAMPLES[command])
+    return f"{EPILOG}\n\nexamples:\n{examples}"
+
+
 SI_NAMES = ("E_star", "E", "poisson", "viscosity", "radius", "speed", "indent", "gap")
 LAYER_BASES = ("bonded", "frictionless")
+
+
+#: A run shorter than this shows no progress line; the line is redrawn this often.
+PROGRESS_AFTER_S = 2.0
+PROGRESS_EVERY_S = 0.5
+#: (function of lubjax.relax, what it is doing): the innermost match names the phase.
+_PHASES = (
+    ("_compiled_rollouts", "compiling the solver (or loading it from the cache)"),
+    ("evaluate_host", "estimating the error"),
+    ("relax", "running the solver and its error estimate"),
+)
+
+
+def _phase(thread_id: int) -> str:
+    """What the solver call on thread ``thread_id`` is doing, read off that thread's stack (the
+    compiled time loop cannot report from inside, so the phase is all there is to show)."""
+    frame = sys._current_frames().get(thread_id)
+    names = set()
+    while frame is not None:
+        names.add(frame.f_code.co_name)
+        frame = frame.f_back
+    return next((phase for code, phase in _PHASES if code in names), "working")
+
+
+@contextlib.contextmanager
+def progress_line(what: str, stream=None):
+    """While the body runs, a line "[elapsed] what: phase ..." redrawn on ``stream`` (stderr)
+    once the body has taken :data:`PROGRESS_AFTER_S`; only when ``stream`` is a terminal, so a
+    redirected log gets no control characters. The line is cleared at the end."""
+    stream = sys.stderr if stream is None else stream
+    isatty = getattr(stream, "isatty", None)
+    if not (callable(isatty) and isatty()):
+        yield
+        return
+    worker, start, done = threading.get_ident(), time.perf_counter(), threading.Event()
+    shown = False
+
+    def draw():
+        nonlocal shown
+        if done.wait(PROGRESS_AFTER_S):
+            return
+        while not done.is_set():
+            line = f"[{time.perf_counter() - start:6.1f} s] {what}: {_phase(worker)} ..."
+            width = shutil.get_terminal_size().columns - 1
+            stream.write("\r\033[K" + line[:width])
+            stream.flush()
+            shown = True
+            done.wait(PROGRESS_EVERY_S)
+
+    ticker = threading.Thread(target=draw, daemon=True)
+    ticker.start()
+    try:
+        yield
+    finally:
+        done.set()
+        ticker.join()
+        if shown:
+            stream.write("\r\033[K")
+            stream.flush()
 
 
 def _add_cache_flag(parser) -> None:
@@ -50,7 +165,7 @@ def _add_cache_flag(parser) -> None:
 
 
 def _parser() -> Parser:
-    p = Parser(prog=PROG, description=DESCRIPTION, epilog=EPILOG)
+    p = Parser(prog=PROG, description=DESCRIPTION, epilog=_epilog("lubjax"))
     add_debug_flag(p)
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     r = sub.add_parser(
@@ -58,7 +173,7 @@ def _parser() -> Parser:
         help="simulate a ramp-and-hold relaxation test",
         description="Give either --beta and --z0 (dimensionless) or all the SI parameters: "
         "--E-star (or --E with --poisson), --viscosity, --radius, --speed, --indent, --gap.",
-        epilog=EPILOG,
+        epilog=_epilog("relax"),
     )
     r.add_argument("--beta", type=float, help="beta (paper eq 8e)")
     r.add_argument("--z0", type=float, help="dimensionless initial gap z0/d_c")
@@ -104,7 +219,7 @@ def _parser() -> Parser:
         "load history of --load-csv, columns time_s,force_N), on a sphere starting at rest at "
         "--gap. Dimensionless numbers use d_c = the Hertz indentation under the (peak) load "
         "and t_c = the ramp time (the time to the peak load for --load-csv).",
-        epilog=EPILOG,
+        epilog=_epilog("creep"),
     )
     _add_material(c)
     c.add_argument("--load", type=positive_float, help="load F [N] (ramp-and-hold)")
@@ -124,7 +239,7 @@ def _parser() -> Parser:
         "--gap (Davis, Serayssol & Hinch 1986), optionally under --weight. Dimensionless "
         "numbers use d_c = gap and t_c = gap/speed; the restitution coefficient is the speed "
         "when the sphere passes back through the starting gap, over the approach speed.",
-        epilog=EPILOG,
+        epilog=_epilog("bounce"),
     )
     _add_material(b)
     b.add_argument("--mass", type=positive_float, help="sphere mass [kg]")
@@ -439,8 +554,9 @@ def _creep(args) -> int:
     profile_times = sorted({min(1.0, t_end), t_end})
     if line:
         print(f"substrate: {line}")
-    res = relax(test.beta, test.z0_bar, t_end, drive=test.drive(history), settings=settings,
-                profile_times=profile_times, substrate=substrate)
+    with progress_line("creep"):
+        res = relax(test.beta, test.z0_bar, t_end, drive=test.drive(history),
+                    settings=settings, profile_times=profile_times, substrate=substrate)
     out = _drive_json(res, test.scales, test.gap)
     out.update(load_N=test.load, hertz_indentation_m=test.indent,
                settings=dataclasses.asdict(settings), substrate=record)
@@ -452,7 +568,7 @@ def _creep(args) -> int:
         f"film h(0) {res.film_center[-1] * d:.3g} m; {res.accepted} steps, run {res.run_s:.3f} s,"
         f" compile {res.compile_s:.2f} s"
     )
-    _write(args, out, res, "creep", test)
+    _write(args, out, res, "creep", test, line)
     return 0
 
 
@@ -480,8 +596,20 @@ def _bounce(args) -> int:
     prepare_outputs(outputs)
     if line:
         print(f"substrate: {line}")
-    res = relax(test.beta, 1.0, t_end, drive=test.drive(), settings=settings,
-                profile_times=[t_end], substrate=substrate)
+    # Profiles at the end and at impact (the peak force): the impact is found by the run, so a
+    # plot takes a second run for its profiles, with as many profile times (the same program)
+    # and no error estimate (the steps, and so the series, are the same).
+    with progress_line("bounce"):
+        res = relax(test.beta, 1.0, t_end, drive=test.drive(), settings=settings,
+                    profile_times=[t_end, t_end], substrate=substrate)
+        if args.plot:
+            impact = float(res.t[np.argmax(res.force)])
+            again = relax(test.beta, 1.0, t_end, drive=test.drive(),
+                          settings=dataclasses.replace(settings, error_estimate=False),
+                          profile_times=[impact, t_end], substrate=substrate)
+            res = dataclasses.replace(res, profile_times=again.profile_times,
+                                      pressure=again.pressure, displacement=again.displacement,
+                                      film=again.film)
     e = restitution(res)
     out = _drive_json(res, test.scales, test.gap)
     v = test.speed
@@ -496,18 +624,32 @@ def _bounce(args) -> int:
         settings=dataclasses.asdict(settings),
         substrate=record,
     )
-    print(
-        f"bounce: St={test.stokes:.4g}, beta={test.beta:.4g} (Davis et al.'s epsilon "
-        f"{test.elasticity:.3g}): closest gap {res.gap.min() * test.gap:.4g} m, film "
-        f"{res.film_min.min() * test.gap:.3g} m; restitution "
-        + ("none (no rebound to x0)" if math.isnan(e) else f"{e:.4f}")
-        + f"; {res.accepted} steps, run {res.run_s:.3f} s, compile {res.compile_s:.2f} s"
-    )
-    _write(args, out, res, "bounce", test)
+    print(bounce_summary(res, test, e))
+    _write(args, out, res, "bounce", test, line, ["impact: peak force", "end"])
     return 0
 
 
-def _write(args, out, res, kind, test):
+def bounce_summary(res, test, e) -> str:
+    """The line ``lubjax bounce`` prints (SI). The sphere's position z is its rigid-body
+    position above the undeformed surface: it goes below 0 when the film pressure indents the
+    substrate, so the closest approach is told by the film, not by z."""
+    x0, ts, fs = test.gap, test.time_scale, test.force_scale
+    low, thin, peak = (int(np.argmin(res.gap)), int(np.argmin(res.film_min)),
+                       int(np.argmax(res.force)))
+    indent = (" (below the undeformed surface: the substrate is indented)"
+              if res.gap[low] < 0 else "")
+    return (
+        f"bounce: St={test.stokes:.4g}, beta={test.beta:.4g} (Davis et al.'s epsilon "
+        f"{test.elasticity:.3g}): peak film force {res.force[peak] * fs:.4g} N at t = "
+        f"{res.t[peak] * ts:.4g} s; minimum film thickness {res.film_min[thin] * x0 * 1e6:.4g} um "
+        f"at t = {res.t[thin] * ts:.4g} s; lowest sphere position (rigid body) z = "
+        f"{res.gap[low] * x0 * 1e6:.4g} um at t = {res.t[low] * ts:.4g} s{indent}; restitution "
+        + ("none (no rebound to x0)" if math.isnan(e) else f"{e:.4f}")
+        + f"; {res.accepted} steps, run {res.run_s:.3f} s, compile {res.compile_s:.2f} s"
+    )
+
+
+def _write(args, out, res, kind, test, substrate, notes=None):
     if args.out:
         with atomic_open(args.out, "w") as f:
             json.dump(out, f)
@@ -515,7 +657,7 @@ def _write(args, out, res, kind, test):
     if args.plot:
         from ._plotting import plot_drive
 
-        plot_drive(res, args.plot, kind, test)
+        plot_drive(res, args.plot, kind, test, substrate=substrate, profile_notes=notes)
         print(f"wrote {args.plot}")
 
 
@@ -550,6 +692,26 @@ def _si_test(args):
     return test
 
 
+def relax_summary(res, test=None) -> str:
+    """The line ``lubjax relax`` prints: in SI units (s, N, μm) when ``test`` (the run's
+    :class:`RelaxationTest`) is given, else dimensionless."""
+    peak = int(np.argmax(res.force))
+    cost = (f"{res.accepted} steps ({res.rejected} rejected), run {res.run_s:.3f} s, "
+            f"compile {res.compile_s:.2f} s")
+    err = np.nanmax(res.force_error)
+    if test is None:
+        return (f"beta={res.beta:.4g} z0={res.z0:.4g}: F(t_end)={res.force[-1]:.5g}, "
+                f"peak F={res.force[peak]:.5g}, min film={res.film_min.min():.3g}; "
+                f"estimated error {err:.2g}; {cost}")
+    ts, fs, um = test.time_scale, test.force_scale, test.indent * 1e6
+    thin = int(np.argmin(res.film_min))
+    return (f"relax: beta={res.beta:.4g} z0/d_c={res.z0:.4g} (d_c = {test.indent:.4g} m, "
+            f"t_c = {ts:.4g} s): force at t = {res.t[-1] * ts:.4g} s {res.force[-1] * fs:.5g} N, "
+            f"peak {res.force[peak] * fs:.5g} N at t = {res.t[peak] * ts:.4g} s; thinnest film "
+            f"{res.film_min[thin] * um:.3g} um at t = {res.t[thin] * ts:.4g} s; estimated force "
+            f"error {err * fs:.2g} N; {cost}")
+
+
 def _relax(args) -> int:
     from ._solve import Settings, check_parameters, relax
 
@@ -576,8 +738,9 @@ def _relax(args) -> int:
     substrate, record, line = _substrate(args, settings, scale)
     profile_times = [t for t in (0.25, 0.5, 1.0, 2.0, t_end) if t <= t_end]
     prepare_outputs(outputs)
-    res = relax(beta, z0, t_end, settings=settings, profile_times=profile_times,
-                substrate=substrate)
+    with progress_line("relax"):
+        res = relax(beta, z0, t_end, settings=settings, profile_times=profile_times,
+                    substrate=substrate)
     out = {
         "beta": beta,
         "z0": z0,
@@ -601,6 +764,8 @@ def _relax(args) -> int:
             t_s=(res.t * test.time_scale).tolist(),
             force_N=(res.force * test.force_scale).tolist(),
             h_min_m=(res.film_min * test.indent).tolist(),
+            h_center_m=(res.film_center * test.indent).tolist(),
+            force_error_N=(res.force_error * test.force_scale).tolist(),
             scales={
                 "time_s": test.time_scale,
                 "force_N": test.force_scale,
@@ -610,14 +775,12 @@ def _relax(args) -> int:
         )
     if line:
         print(f"substrate: {line}")
-    print(
-        f"beta={beta:.4g} z0={z0:.4g}: F(t_end)={res.force[-1]:.5g}, peak F={res.force.max():.5g}, "
-        f"min film={res.film_min.min():.3g}; estimated error {np.nanmax(res.force_error):.2g}; "
-        f"{res.accepted} steps ({res.rejected} rejected), run {res.run_s:.3f} s, "
-        f"compile {res.compile_s:.2f} s"
-    )
+    print(relax_summary(res, test))
     note = res.unresolved_film()
     if note:
+        if test:
+            note += (f" (t̄ = t/t_c, t_c = {test.time_scale:.4g} s; h̄ = h/d_c, "
+                     f"d_c = {test.indent:.4g} m)")
         print(f"note: {note}")
     if args.out:
         with atomic_open(args.out, "w") as f:
@@ -626,7 +789,7 @@ def _relax(args) -> int:
     if args.plot:
         from ._plotting import plot_result
 
-        plot_result(res, args.plot, test=test)
+        plot_result(res, args.plot, test=test, substrate=line)
         print(f"wrote {args.plot}")
     return 0
 
