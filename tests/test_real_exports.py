@@ -1,0 +1,253 @@
+"""Instrument exports as they are: other separators, decimal commas, vendor header blocks, extra
+columns, no header row, declared units and a reversed force sign, all read to the SI arrays of
+the project's own file, and each mistake named before any fitting.
+
+Every case is built from data/paper_dc140.csv; nothing here runs a fit."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from fitting import _checks, parse_trace, read_trace, scales_from_trace
+from fitting._io import TraceError, check_force_sign, parse_columns, parse_units
+
+SEED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data",
+                    "paper_dc140.csv")
+REF = read_trace(SEED)
+
+
+def _export(sep=",", comma=False, header=None, scale=(1.0, 1.0, 1.0), extra=False,
+            preamble="", meta="# radius_m: 2e-3\n", rows=None):
+    """The reference trace written as an export: time, displacement, force times ``scale``
+    (``extra``: a temperature column first and a status text column last)."""
+    lines = [preamble + meta] if (preamble or meta) else []
+    if header is not None:
+        lines.append(sep.join(header) + "\n")
+    n = REF.time.size if rows is None else rows
+    for k in range(n):
+        cells = [f"{v * s:.10g}" for v, s in zip(
+            (REF.time[k], REF.displacement[k], REF.force[k]), scale)]
+        if comma:
+            cells = [c.replace(".", ",") for c in cells]
+        if extra:
+            cells = [f"{21.5 + 0.001 * k:.3f}".replace(".", "," if comma else ".")] + cells + [
+                "ok"]
+        lines.append(sep.join(cells) + "\n")
+    return "".join(lines)
+
+
+def _same_as_reference(tr, rtol=1e-9):
+    np.testing.assert_allclose(tr.time, REF.time, rtol=rtol, atol=1e-15)
+    np.testing.assert_allclose(tr.displacement, REF.displacement, rtol=rtol, atol=1e-18)
+    np.testing.assert_allclose(tr.force, REF.force, rtol=rtol, atol=1e-15)
+    assert tr.radius == REF.radius
+
+
+def _both_paths(tmp_path, text, **kw):
+    """read_trace (numpy fast path) and parse_trace (line by line) agree; returns the trace."""
+    p = tmp_path / "export.txt"
+    p.write_text(text, encoding="utf-8")
+    fast = read_trace(p, **kw)
+    slow = parse_trace(text, name=str(p), **kw)
+    for a, b in zip(fast[:3], slow[:3]):
+        np.testing.assert_array_equal(a, b)
+    assert fast.metadata == slow.metadata
+    return fast
+
+
+VENDOR = ("Instrument: Tribo-X 3000\nOperator: A. N. Other\nDate: 2024-05-01 10:22\n"
+          "Sample rate: 100 Hz\n\n")
+
+
+@pytest.mark.parametrize("case", ["semicolon_decimal_comma", "tab", "tab_decimal_comma",
+                                  "whitespace_preamble", "extra_columns", "no_header"])
+def test_exports_read_to_the_reference_si_arrays(case, tmp_path):
+    units = ("Time (s)", "Piezo (nm)", "Load (uN)")
+    to_units = (1.0, 1e9, 1e6)
+    if case == "semicolon_decimal_comma":
+        text = _export(";", comma=True, header=units, scale=to_units)
+        kw = dict(columns="time=Time (s),displacement=Piezo (nm),force=Load (uN)")
+    elif case == "tab":
+        text = _export("\t", header=("time_s", "displacement_m", "force_N"))
+        kw = {}
+    elif case == "tab_decimal_comma":
+        text = _export("\t", comma=True, header=("time_ms", "displacement_um", "force_mN"),
+                       scale=(1e3, 1e6, 1e3))
+        kw = {}
+    elif case == "whitespace_preamble":
+        text = _export("   ", header=units, scale=to_units, preamble=VENDOR)
+        kw = dict(columns="time=Time (s),displacement=Piezo (nm),force=Load (uN)")
+    elif case == "extra_columns":
+        text = _export(",", header=("Temp (C)", "t [ms]", "d [um]", "F [mN]", "status"),
+                       scale=(1e3, 1e6, 1e3), extra=True)
+        kw = dict(columns="time=t [ms],displacement=d [um],force=F [mN]")
+    else:
+        text = _export(",", scale=(1e3, 1e6, 1e3))
+        kw = dict(columns="time=1,displacement=2,force=3", units="time=ms,displacement=um,force=mN")
+    tr = _both_paths(tmp_path, text, **kw)
+    _same_as_reference(tr)
+
+
+def test_numbered_columns_skip_extra_cells_and_a_vendor_header(tmp_path):
+    text = _export(";", comma=True, header=("T", "t", "d", "F", "s"), extra=True, preamble=VENDOR)
+    tr = _both_paths(tmp_path, text, columns="time=2,displacement=3,force=4")
+    _same_as_reference(tr)
+
+
+def test_units_line_in_the_file_and_on_the_command_line(tmp_path):
+    mN_ms = _export(",", header=("time_s", "displacement_m", "force_N"), scale=(1e3, 1.0, 1e3),
+                    meta="# radius_m: 2e-3\n# units: force=mN,time=ms\n")
+    tr = _both_paths(tmp_path, mN_ms)
+    _same_as_reference(tr)
+    assert "units" not in tr.metadata  # the data are SI now: writing it back must not rescale
+    assert tr.metadata["read_as"] == "time in ms, force in mN"
+    # the command line's units win over the file's line, which wins over the header's
+    mixed = _export(",", header=("time_s", "displacement_m", "force_uN"), scale=(1.0, 1.0, 1e3),
+                    meta="# radius_m: 2e-3\n# units: force=nN\n")
+    _same_as_reference(_both_paths(tmp_path, mixed, units="force=mN"))
+    with_line = _export(",", header=("time_s", "displacement_m", "force_uN"),
+                        scale=(1.0, 1.0, 1e3), meta="# radius_m: 2e-3\n# units: force=mN\n")
+    _same_as_reference(_both_paths(tmp_path, with_line))
+
+
+@pytest.mark.parametrize("spec, match", [
+    ("force=kN", r"unknown unit 'kN' for the force column \(allowed: N, mN, uN, nN\)"),
+    ("pressure=Pa", r"unknown column 'pressure' \(allowed: time, displacement, force\)"),
+    ("time=min", r"allowed: s, ms, us"),
+    ("displacement", r"'displacement' has no value"),
+])
+def test_unknown_units_name_the_column_and_the_allowed_units(spec, match):
+    with pytest.raises(TraceError, match=match):
+        parse_units(spec, "--units")
+
+
+def test_micro_sign_is_accepted():
+    assert parse_units("force=µN,displacement=μm") == {"force": "uN", "displacement": "um"}
+
+
+def test_units_line_in_the_file_is_checked(tmp_path):
+    text = _export(",", header=("time_s", "displacement_m", "force_N"),
+                   meta="# radius_m: 2e-3\n# units: force=lbf\n")
+    with pytest.raises(TraceError, match=r"line 2: units: force: unknown unit 'lbf'"):
+        parse_trace(text, name="x.csv")
+
+
+def test_unit_in_a_header_cell_is_checked():
+    text = _export(",", header=("t (s)", "d (m)", "F (kN)"))
+    with pytest.raises(TraceError, match=r"line 2: column 'F \(kN\)': unknown unit 'kN'"):
+        parse_trace(text, name="x.csv", columns="time=1,displacement=2,force=3")
+
+
+def test_column_specs():
+    assert parse_columns("time=Time, s,displacement=2,force=Load (uN)") == {
+        "time": "Time, s", "displacement": 1, "force": "Load (uN)"}
+    with pytest.raises(TraceError, match="missing force"):
+        parse_columns("time=1,displacement=2")
+    with pytest.raises(TraceError, match="same column number"):
+        parse_columns("time=1,displacement=1,force=3")
+
+
+@pytest.mark.parametrize("text, kw, match", [
+    # an export with its own header names and no mapping: the header and the separator named
+    (_export(";", comma=True, header=("Time (s)", "Piezo (nm)", "Load (uN)")), {},
+     r"line 2, column 1: unknown column 'Time \(s\)' .*the file is separated by ';'.*--columns"),
+    # an extra column without a mapping
+    (_export(",", header=("time_s", "displacement_m", "force_N", "temp_C")), {},
+     r"line 2, column 4: unknown column 'temp_C'.*ignore extra ones, give --columns"),
+    # no header row
+    (_export(",", header=None), {}, r"no header row .*--columns time=1,displacement=2,force=3"),
+    # a mapped name that is not in the header
+    (_export(";", header=("Time (s)", "Piezo (nm)", "Load (uN)")),
+     dict(columns="time=Time (s),displacement=Piezo (nm),force=Force (uN)"),
+     r"line 2: column 'Force \(uN\)' not found; the header has: 'Time \(s\)', 'Piezo \(nm\)', "
+     r"'Load \(uN\)' \(separated by ';'\)"),
+    # a mapped number beyond the row
+    (_export(",", header=None), dict(columns="time=1,displacement=2,force=5"),
+     r"line 2: column 5 \(force, column 5\) is not there: the rows have 3 cells"),
+])
+def test_refusals_name_the_cause(text, kw, match):
+    with pytest.raises(TraceError, match=match):
+        parse_trace(text, name="x.csv", **kw)
+
+
+def test_malformed_value_in_an_export_names_line_and_column(tmp_path):
+    text = _export(";", comma=True, header=("Time (s)", "Piezo (nm)", "Load (uN)"),
+                   scale=(1.0, 1e9, 1e6))
+    lines = text.splitlines(keepends=True)
+    cells = lines[20].split(";")
+    cells[2] = "n/a\n"
+    lines[20] = ";".join(cells)
+    p = tmp_path / "bad.csv"
+    p.write_text("".join(lines))
+    with pytest.raises(TraceError, match=r"bad\.csv: line 21, column 3 \(Load \(uN\)\): 'n/a' is "
+                       r"not a number"):
+        read_trace(p, columns="time=Time (s),displacement=Piezo (nm),force=Load (uN)")
+
+
+# --------------------------------------------------------------------------- unit mistakes
+
+
+def _rescaled(time=1.0, force=1.0):
+    return REF._replace(time=REF.time * time, force=REF.force * force, name="x.csv")
+
+
+def test_negative_force_is_refused_before_fitting_with_the_fix():
+    neg = _rescaled(force=-1.0)
+    with pytest.raises(TraceError, match=r"x\.csv: column force_N: .*negative in compression.*"
+                       r"--force-sign -1"):
+        check_force_sign(neg, "travel")
+    with pytest.raises(TraceError, match="--force-sign -1"):
+        scales_from_trace(neg)  # the fit's first step: before any model run
+    check_force_sign(REF, "travel")  # the right sign passes
+    check_force_sign(REF, "spring")
+
+
+def test_force_sign_option_flips_it_back(tmp_path):
+    text = _export(",", header=("time_s", "displacement_m", "force_N"), scale=(1.0, 1.0, -1.0))
+    tr = _both_paths(tmp_path, text, force_sign=-1)
+    _same_as_reference(tr)
+    assert tr.metadata["read_as"] == "force sign flipped"
+    check_force_sign(tr, "travel")
+
+
+def test_negative_load_under_load_control_is_refused():
+    creep = read_trace(os.path.join(os.path.dirname(SEED), "creep_30mN.csv"))
+    check_force_sign(creep, "force")
+    with pytest.raises(TraceError, match=r"the load .* is negative.*--force-sign -1"):
+        check_force_sign(creep._replace(force=-creep.force), "force")
+
+
+def _values(E_star=3.92e6, viscosity=100.0):
+    return {"E_star": E_star, "viscosity": viscosity, "z0": 1.4e-4, "offset": 0.0}
+
+
+def test_plausible_fit_has_no_flags():
+    assert _checks.plausibility_flags(_values(), speed=1e-4) == []
+
+
+def test_force_in_mN_read_as_N_is_flagged_with_the_unit_fix():
+    # what the fit of paper_dc140 with its force in mN under force_N gives: both 1000x
+    flags = _checks.plausibility_flags(_values(1.503e9, 4.975e4), speed=1e-4)
+    assert len(flags) == 2
+    assert "E* = 1.503 GPa" in flags[0] and "use --units force=mN" in flags[0]
+    assert "eta = 4.975e+04 Pa s" in flags[1] and "force=mN" in flags[1]
+
+
+def test_time_in_ms_read_as_s_is_flagged_with_the_unit_fix():
+    # E* unchanged, eta 1000x: the time is in ms
+    flags = _checks.plausibility_flags(_values(3.92e6, 1.0e5), speed=1e-7)
+    assert len(flags) == 1 and "use --units time=ms" in flags[0]
+
+
+def test_force_in_uN_and_too_soft_and_slow_ramps_are_flagged():
+    flags = _checks.plausibility_flags(_values(3.9e12, 1e8), speed=1e-4)
+    assert "force=uN" in flags[0]
+    flags = _checks.plausibility_flags(_values(3.9, 1e-1), speed=1e-4)
+    assert "E* = 3.9 Pa" in flags[0] and "below" in flags[0]
+    flags = _checks.plausibility_flags(_values(), speed=1e-10)
+    assert "ramp speed" in flags[0] and "1 nm/s" in flags[0]
+    flags = _checks.plausibility_flags(_values(), speed=3.0)
+    assert "ramp speed" in flags[0] and "1 m/s" in flags[0]
