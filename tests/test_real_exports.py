@@ -251,3 +251,192 @@ def test_force_in_uN_and_too_soft_and_slow_ramps_are_flagged():
     assert "ramp speed" in flags[0] and "1 nm/s" in flags[0]
     flags = _checks.plausibility_flags(_values(), speed=3.0)
     assert "ramp speed" in flags[0] and "1 m/s" in flags[0]
+
+
+# --------------------------------------------------------------------------- the command line
+
+
+def _fake_fits(seen):
+    """fit_traces stand-in: records its arguments and returns plausible results."""
+    from test_cli_errors import _fake_fit
+
+    def fake(traces, **kwargs):
+        seen.append((traces, kwargs))
+        return _fake_fit(traces)
+
+    return fake
+
+
+def _write(tmp_path, trace, name):
+    from fitting import write_trace
+
+    p = tmp_path / name
+    write_trace(p, trace)
+    return str(p)
+
+
+@pytest.mark.parametrize("time, force, warning", [
+    (1.0, 1e3, r"E\* = [\d.]+ GPa is above 1 GPa, the top of soft lubricated contact: is the "
+               r"force in mN rather than N\? use --units force=mN"),
+    (1e3, 1.0, r"eta = [\d.]+e\+05 Pa s is above 10000 Pa s, the top of lubricating films: is "
+               r"the time in ms rather than s\? use --units time=ms"),
+])
+def test_cli_warns_of_a_unit_slip_before_fitting(time, force, warning, tmp_path, monkeypatch,
+                                                 capsys):
+    import re
+
+    from fitting import _cli as fcli
+
+    path = _write(tmp_path, _rescaled(time=time, force=force), "slip.csv")
+    monkeypatch.setattr(fcli, "fit_traces", _fake_fits([]))
+    assert fcli.main([path, "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert re.search(r"^lubjax-fit: warning: slip\.csv: before fitting, from the data: "
+                     + warning, err, re.M), err
+    assert fcli.main([_write(tmp_path, REF, "ok.csv"), "--quiet"]) == 0
+    assert "warning" not in capsys.readouterr().err
+
+
+def test_cli_units_read_the_slipped_file_as_the_reference(tmp_path, monkeypatch, capsys):
+    from fitting import _cli as fcli
+
+    path = _write(tmp_path, _rescaled(time=1e3, force=1e3), "slip.csv")
+    seen = []
+    monkeypatch.setattr(fcli, "fit_traces", _fake_fits(seen))
+    assert fcli.main([path, "--quiet", "--units", "time=ms,force=mN"]) == 0
+    assert "warning" not in capsys.readouterr().err
+    _same_as_reference(seen[0][0][0], rtol=1e-6)
+
+
+def test_cli_refuses_negative_force_before_fitting(tmp_path, monkeypatch, capsys):
+    from fitting import _cli as fcli
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("fitting started")
+
+    path = _write(tmp_path, _rescaled(force=-1.0), "neg.csv")
+    monkeypatch.setattr(fcli, "fit_traces", no_fit)
+    assert fcli.main([path, "--quiet", "--out", str(tmp_path / "o" / "f.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("lubjax-fit: error: ")
+    assert "negative in compression" in err and "--force-sign -1" in err
+    assert not (tmp_path / "o").exists()
+    seen = []
+    monkeypatch.setattr(fcli, "fit_traces", _fake_fits(seen))
+    assert fcli.main([path, "--quiet", "--force-sign", "-1"]) == 0
+    np.testing.assert_allclose(seen[0][0][0].force, REF.force, rtol=1e-6, atol=1e-12)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--units", "force=kN"], "--units: force: unknown unit 'kN' for the force column (allowed: "
+                              "N, mN, uN, nN)"),
+    (["--units", "load=mN"], "--units: unknown column 'load' (allowed: time, displacement, force)"),
+    (["--columns", "time=1,force=3"], "--columns: missing displacement"),
+    (["--columns", "time=Time (s),displacement=2,force=3"], "column 'Time (s)' not found"),
+    (["--force-sign", "2"], "argument --force-sign: invalid choice"),
+    (["--fix", "viscosity"], "--fix: write NAME=VALUE"),
+    (["--fix", "eta=1e-3"], "--fix: unknown parameter 'eta' for this model (allowed: E_star, "
+                            "viscosity, z0, offset)"),
+    (["--fix", "viscosity=thin"], "--fix viscosity: 'thin' is not a number"),
+    (["--fix", "viscosity=1,viscosity=2"], "--fix: viscosity is given twice"),
+])
+def test_cli_option_errors_are_one_line_before_fitting(argv, message, capsys, monkeypatch):
+    from fitting import _cli as fcli
+
+    monkeypatch.setattr(fcli, "fit_traces", _fake_fits([]))
+    assert fcli.main([SEED, "--quiet", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and message in err, err
+
+
+def test_cli_fix_reaches_the_fit(monkeypatch, capsys):
+    from fitting import _cli as fcli
+
+    seen = []
+    monkeypatch.setattr(fcli, "fit_traces", _fake_fits(seen))
+    assert fcli.main([SEED, "--quiet", "--fix", "viscosity=1e-3", "--fix", "z0=1.4e-4"]) == 0
+    assert seen[0][1]["fixed"] == {"viscosity": 1e-3, "z0": 1.4e-4}
+    assert fcli.main([SEED, SEED.replace("dc140", "dc126"), "--quiet", "--shared", "E_star",
+                      "--fix", "viscosity=100"]) == 0
+    assert seen[1][1]["fixed"] == {"viscosity": 100.0} and seen[1][1]["shared"] == ("E_star",)
+    assert fcli.main([SEED, SEED.replace("dc140", "dc126"), "--quiet", "--shared", "viscosity",
+                      "--fix", "viscosity=100"]) == 2
+    assert "also in --shared" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- fixed parameters
+
+
+def test_fixed_parameters_leave_the_fitted_vector_in_separate_and_joint_layouts():
+    from fitting._fit import _layout
+    from fitting._model import ModelSpec
+
+    spec = ModelSpec()  # E_star, viscosity, z0, offset
+    theta0 = np.log(np.array([[3.9e6, 100.0, 1.4e-4, 1.0], [4.1e6, 90.0, 1.5e-4, 1.0]]))
+    theta0[:, 3] = [0.01, -0.02]
+    lay, x0 = _layout([[0, 1]], spec, ["a", "b"], theta0, ("E_star",), ("viscosity",))
+    assert lay.labels[0] == ["E_star", "z0[a]", "offset[a]", "z0[b]", "offset[b]"]
+    for t in (0, 1):  # every trace's θ: the fixed viscosity from base, the rest from x
+        theta = lay.base[t] + lay.M[t] @ x0[0]
+        assert theta[1] == theta0[t, 1]
+        assert theta[2] == theta0[t, 2] and theta[3] == theta0[t, 3]
+    assert list(lay.active) == [True, False, True, True]
+    lay, x0 = _layout([[0], [1]], spec, ["a", "b"], theta0, (), ("viscosity", "offset"))
+    assert lay.labels == [["E_star", "z0"], ["E_star", "z0"]]
+
+
+@pytest.mark.parametrize("fixed, shared, match", [
+    ({"eta": 1.0}, (), r"fixed: unknown parameter 'eta'"),
+    ({"viscosity": -1.0}, (), r"fixed: viscosity must be a finite number > 0"),
+    ({"z0": float("nan")}, (), r"fixed: z0 must be a finite number > 0"),
+    ({"viscosity": 1.0}, ("viscosity",), r"also shared"),
+    ({"E_star": 1e6, "viscosity": 1.0, "z0": 1e-4, "offset": 0.0}, (), r"nothing is left to fit"),
+])
+def test_fixed_values_are_checked(fixed, shared, match):
+    from fitting._fit import _check_fixed
+    from fitting._model import ModelSpec
+
+    with pytest.raises(ValueError, match=match):
+        _check_fixed(fixed, ModelSpec(), shared)
+
+
+# --------------------------------------------------------------------------- end to end (~15 s)
+
+
+@pytest.mark.slow
+def test_cli_fit_of_force_in_mN_is_flagged_in_console_json_and_report(tmp_path, capsys):
+    """The real fit of paper_dc140 with its force in mN under force_N: it converges to an E*
+    1000x the truth, and every output says so with the fix; z0 held at its true value."""
+    import json
+
+    from fitting import _cli as fcli
+
+    path = _write(tmp_path, _rescaled(force=1e3), "mN.csv")
+    out, report = tmp_path / "fit.json", tmp_path / "fit.txt"
+    z0 = float(REF.metadata["true_z0_m"])
+    assert fcli.main([path, "--quiet", "--no-cache", "--out", str(out), "--report", str(report),
+                      "--fix", f"z0={z0!r}"]) == 0
+    console = capsys.readouterr()
+    fix = "is the force in mN rather than N? use --units force=mN"
+    assert "before fitting, from the data: E* = " in console.err and fix in console.err
+    assert "  warning: E* = " in console.out and fix in console.out
+    d = json.loads(out.read_text())
+    assert d["plausible"] is False and any(fix in f for f in d["flags"])
+    assert d["E_star_Pa"] == pytest.approx(1e3 * float(REF.metadata["true_E_star_Pa"]), rel=0.03)
+    assert d["fixed"] == ["z0"] and d["z0_m"] == z0 and d["stderr"]["z0_m"] == 0.0
+    assert fix in report.read_text().split("[[Flags]]")[1]
+
+
+@pytest.mark.slow
+def test_joint_fit_with_a_fixed_viscosity():
+    from fitting import fit_traces
+
+    traces = [REF, read_trace(SEED.replace("dc140", "dc126"))]
+    res = fit_traces(traces, shared=("E_star",), fixed={"viscosity": 100.0})
+    assert all(r.converged for r in res)
+    assert res[0].E_star == res[1].E_star and res[0].shared == ("E_star",)
+    for r, tr in zip(res, traces):
+        assert r.viscosity == 100.0 and r.stderr["viscosity"] == 0.0 and r.fixed == ("viscosity",)
+        assert r.stderr["E_star"] > 0 and r.stderr["z0"] > 0
+        assert r.z0 == pytest.approx(float(tr.metadata["true_z0_m"]), rel=0.01)
+    assert res[0].E_star == pytest.approx(float(REF.metadata["true_E_star_Pa"]), rel=0.02)
