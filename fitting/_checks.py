@@ -8,9 +8,10 @@ likely one with its fix:
 * E* in [1 kPa, 1 GPa]: from the softest hydrogels to stiff rubbers and polymers; glass and metals
   (tens of GPa) are not soft contacts. E* ∝ force, so E* far above means the force is in mN
   (μN, nN) rather than N.
-* η in [1e-4, 1e4] Pa s: from below water (1e-3) to above the most viscous silicone oils
-  (~2e3). η ∝ force × time: η high with E* high is the force's unit, η high alone the time's
-  (ms read as s makes η 1000x larger, E* unchanged).
+* η in [1e-4, 1e4] Pa s: from below water (1e-3) to 10x a 10⁶ cSt silicone oil (~1e3); the
+  stiffest silicone gums (~2e4) are flagged too, the price of catching a time in ms on a
+  100 Pa s oil (η = 1e5). η ∝ force × time: η high with E* high is the force's unit, η high
+  alone the time's (ms read as s makes η 1000x larger, E* unchanged).
 * the ramp speed d_c/t_c in [1 nm/s, 1 m/s]: no indenter or tribometer ramps outside it.
 
 The checks flag; they never refuse (a fit may be right about an unusual sample).

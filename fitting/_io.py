@@ -1,11 +1,12 @@
-"""Reading and writing force traces (the CSV format of ``data/README.md``).
+"""Reading and writing force traces (the format of ``data/README.md``).
 
-A trace file is plain UTF-8 text (a leading byte-order mark is accepted)::
+The project's own file is plain UTF-8 text (a leading byte-order mark is accepted)::
 
     # radius_m: 2.0e-3          <- required: sphere (or reduced, eq 24) radius R [m]
     # poisson_ratio: 0.5        <- optional; any other "# key: value" line is kept as metadata
     # drive: force              <- optional: travel (default), spring, force (load control)
     # stiffness_N_m: 5000       <- optional: the load cell's stiffness (then drive spring)
+    # units: force=mN           <- optional: units of the columns (converted to SI)
     time_s,displacement_m,force_N
     0.0,0.0,0.0012
     ...
@@ -15,10 +16,19 @@ A trace file is plain UTF-8 text (a leading byte-order mark is accepted)::
   (positive = toward it; the gap is z(t) = z0 - d(t), z0 unknown);
 * ``force_N`` normal force [N], positive when the film/substrate pushes back.
 
+Instrument exports are read as they are: the separator is found from the rows of numbers
+(';' or tabs where most rows have them, else ',', else whitespace; decimal commas where the
+separator is not ','), lines without '#' before the header row (a vendor's block) are skipped,
+and ``columns=`` maps cells by header name or number (other cells ignored; no header row needed
+with numbers). A column's unit is, first found: ``units=``, the ``# units:`` line, the unit in
+its header cell (``force_mN``, ``Load (uN)``, ``Load [uN]``), else SI; ``force_sign=-1`` flips
+the force. The trace is SI from then on (``metadata["read_as"]`` says what was converted).
+
 Every malformed input raises :class:`TraceError` (a ``ValueError``) naming the file, the line
 (1-based) and, for cell errors, the column. Scales the thin-film model cannot describe (travel
 beyond ``MAX_TRAVEL_OVER_RADIUS`` R, |force| above ``MAX_FORCE_N``, R outside ``RADIUS_RANGE_M``)
-are refused the same way, with the likely unit mistake (:func:`check_scales`).
+are refused the same way, with the likely unit mistake (:func:`check_scales`), and so is a
+force negative in compression (:func:`check_force_sign`, once the drive is known).
 
 Reading is numpy-fast: the numeric block goes through ``numpy.loadtxt``; only a file that it
 rejects is parsed again line by line, to name the offending line and column.
@@ -152,13 +162,15 @@ def check_scales(trace: Trace) -> None:
             f"{name}: column displacement_m: the travel reaches {travel:.4g} m, "
             f"{travel / r:.3g} times the radius R = {r:g} m; the thin-film model needs travel "
             f"≪ R and refuses more than {MAX_TRAVEL_OVER_RADIUS:g} R. Is displacement_m in "
-            "millimetres or micrometres instead of metres?"
+            "millimetres or micrometres instead of metres? Declare it: --units displacement=um "
+            "(or a '# units: displacement=um' line)"
         )
     peak = float(np.max(np.abs(trace.force))) if trace.force.size else 0.0
     if peak > MAX_FORCE_N:
         raise TraceError(
             f"{name}: column force_N: |force| reaches {peak:.4g} N, above {MAX_FORCE_N:g} N, "
-            "far beyond a soft lubricated contact. Is force_N in another unit (mN, μN)?"
+            "far beyond a soft lubricated contact. Is force_N in another unit (mN, μN)? "
+            "Declare it: --units force=mN (or a '# units: force=mN' line)"
         )
 
 
@@ -510,7 +522,10 @@ def _scan(lines, name: str, columns=None, units=None, force_sign=1.0):
                 f"{name}: no rows of numbers in columns "
                 f"{', '.join(str(j + 1) for j in idx)} (separated by {_SEPARATOR_NAMES[sep]})"
             )
-        h = first - 1 if first else None
+        # the line before the data is their header row only if it has as many cells (not the
+        # last line of a vendor's block)
+        h = first - 1 if first and len(_header_cells(body[first - 1][1][1], sep, n_data)) == (
+            n_data) else None
     else:
         names = [v for v in columns.values() if isinstance(v, str)]
         h = next((i for i, (_, (_, line)) in enumerate(body)
@@ -623,6 +638,9 @@ def _mapped_columns(columns: dict, cells, line: int, name: str):
             j = hits[0]
         else:
             j = v
+        if j in use:
+            raise TraceError(f"{name}: columns: {QUANTITIES[use.index(j)]} and {q} are both "
+                             f"column {j + 1}")
         use.append(j)
         if cells is not None and j < len(cells):
             labels.append(cells[j])

@@ -440,3 +440,71 @@ def test_joint_fit_with_a_fixed_viscosity():
         assert r.stderr["E_star"] > 0 and r.stderr["z0"] > 0
         assert r.z0 == pytest.approx(float(tr.metadata["true_z0_m"]), rel=0.01)
     assert res[0].E_star == pytest.approx(float(REF.metadata["true_E_star_Pa"]), rel=0.02)
+
+
+# --------------------------------------------------------------------------- fuzz
+
+
+FUZZ_SEEDS = {
+    "semicolon_decimal_comma_vendor": (
+        dict(sep=";", comma=True, header=("Time (s)", "Piezo (nm)", "Load (uN)"),
+             scale=(1.0, 1e9, 1e6), preamble=VENDOR),
+        dict(columns="time=Time (s),displacement=Piezo (nm),force=Load (uN)")),
+    "tab_numbered_extra": (
+        dict(sep="\t", comma=True, header=None, scale=(1e3, 1e6, 1e3), extra=True),
+        dict(columns="time=2,displacement=3,force=4", units="time=ms,displacement=um,force=mN")),
+    "whitespace_vendor": (
+        dict(sep="  ", header=("time_s", "displacement_m", "force_N"), preamble=VENDOR), {}),
+}
+
+
+@pytest.mark.parametrize("seed", sorted(FUZZ_SEEDS))
+def test_mutated_exports_load_or_raise_trace_error_alike_on_both_paths(seed, tmp_path):
+    """tests/test_io_fuzz.py's mutations on exports: a TraceError (the same from the numpy path
+    and the line-by-line parser) or the same arrays; never another exception."""
+    import test_io_fuzz as fuzz
+
+    export, kw = FUZZ_SEEDS[seed]
+    seed_bytes = _export(**export).encode()
+    outcomes = {"loaded": 0, "error": 0}
+    for case in range(100):
+        rng = np.random.default_rng(case)
+        data = seed_bytes
+        for _ in range(1 + int(rng.random() < 0.3)):
+            m = fuzz.MUTATIONS[rng.integers(len(fuzz.MUTATIONS))]
+            try:
+                data = m(rng, data)
+            except (StopIteration, ValueError, IndexError):
+                continue  # a mutation that needs the project's own header row
+        p = tmp_path / f"case{case}.txt"
+        p.write_bytes(data)
+        try:
+            fast = read_trace(p, **kw)
+        except TraceError as exc:
+            fast = exc
+        try:
+            slow = parse_trace(data.decode("utf-8"), name=str(p), **kw)
+        except UnicodeDecodeError:
+            assert isinstance(fast, TraceError)
+            slow = fast
+        except TraceError as exc:
+            slow = exc
+        if isinstance(fast, TraceError) or isinstance(slow, TraceError):
+            assert str(fast) == str(slow), case
+            assert str(fast).startswith(f"{p}: ") and "\n" not in str(fast)
+            outcomes["error"] += 1
+        else:
+            for a, b in zip(fast[:3], slow[:3]):
+                np.testing.assert_array_equal(a, b)
+            outcomes["loaded"] += 1
+    assert outcomes["loaded"] >= 20 and outcomes["error"] >= 20, outcomes
+
+
+def test_vendor_line_before_numbered_data_is_not_taken_for_a_header():
+    # the block's last line ends in "(mN)": read as a header cell, it would rescale the force
+    text = _export(",", header=None, preamble="Instrument: X\nLoad cell range (mN)\n")
+    tr = parse_trace(text, name="x.csv", columns="time=1,displacement=2,force=3")
+    _same_as_reference(tr)
+    with pytest.raises(TraceError, match=r"time and force are both column 1"):
+        parse_trace(_export(",", header=("a", "b", "c")), name="x.csv",
+                    columns="time=a,displacement=b,force=a")
