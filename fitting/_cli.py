@@ -2,6 +2,8 @@
 
 Prints one summary line per trace to stdout, a progress line to stderr while it works, writes
 the JSON (one object for one trace, a list for several), optionally a CSV table and the plot(s).
+Starting values outside soft lubricated contact (:mod:`fitting._checks`: a column in the wrong
+unit) are warned about on stderr before the fit, and flagged in every output after it.
 
 Every output is checked before the traces are read (writable, not an input trace, not another
 output, a known plot format) and written atomically. Every failure is one line on stderr: exit
@@ -41,17 +43,18 @@ from lubjax._files import (
 )
 
 from ._cache import enable_compilation_cache
+from ._checks import plausibility_flags
 from ._compare import compare_models
-from ._fit import METHODS, FitResult, fit_traces
-from ._io import read_trace
-from ._model import DRIVES, FIT_SETTINGS, LAYER_BASES, ModelSpec
+from ._fit import METHODS, FitResult, fit_traces, initial_guess
+from ._io import parse_columns, parse_units, read_trace
+from ._model import DRIVES, FIT_SETTINGS, LAYER_BASES, ModelSpec, scales_from_trace
 from ._report import fit_report, result_to_dict, short_value
 
 PROG = "lubjax-fit"
 SHAREABLE = ("E_star", "viscosity", "z0", "stiffening", "relaxation_time")
 TRACE_FORMAT = """
 
-trace files: CSV (UTF-8), '# key: value' lines, a header row, then numbers:
+trace files: delimited text (UTF-8), '# key: value' lines, a header row, numbers:
   # radius_m: 2.0e-3
   time_s,displacement_m,force_N
   0.0,0.0,0.0012
@@ -62,7 +65,7 @@ metadata lines:
   # drive:            optional: travel (default), spring or force (--drive)
   # stiffness_N_m:    optional: the load cell's stiffness k [N/m] (spring)
   other keys are kept in the JSON; '# text' without a colon is a comment
-columns (any order, no others):
+columns (any order; other columns only with --columns):
   time_s              time [s], strictly increasing
   displacement_m      the stage's travel toward the substrate since the first
                       row [m] (under --drive force: the sphere's approach)
@@ -206,12 +209,32 @@ def write_table(results, path: str) -> None:
 def build_parser() -> Parser:
     p = Parser(
         prog=PROG,
-        description="Fit the substrate modulus E*, film viscosity eta and initial gap z0 (and, "
-        "for a viscoelastic solid, E0/Einf and tau) to tribometer traces (CSV files: see "
-        "below) with the lubjax soft-EHL solver.",
+        description="Fit the substrate modulus E*, film viscosity eta and initial gap z0 (and,\n"
+        "for a viscoelastic solid, E0/Einf and tau) to tribometer traces with the lubjax\n"
+        "soft-EHL solver.\n\n"
+        "A trace is delimited text (',', ';', tabs or spaces; decimal commas with ';' or tabs)\n"
+        "with the sphere radius on a line '# radius_m: 2e-3' before the header row\n"
+        "'time_s,displacement_m,force_N': time, travel toward the substrate since the first\n"
+        "row, force (positive when pushed back). Other exports: --columns maps their cells,\n"
+        "--units declares units (or a '# units: force=mN' line, or '(mN)' in a header cell),\n"
+        "lines before the header row are skipped. The trace file format page of the\n"
+        "documentation (docs/formats.md) has it all.",
         epilog=_epilog(),
     )
-    p.add_argument("traces", nargs="+", help="trace CSV file(s)")
+    p.add_argument("traces", nargs="+", help="trace file(s)")
+    p.add_argument("--columns", help="which cells hold the trace, by header name or number "
+                   "(from 1): 'time=Time (s),displacement=Piezo (nm),force=Load (uN)' or "
+                   "'time=1,displacement=2,force=3' (a file without a header row); other cells "
+                   "are ignored, a unit in brackets in the header is the column's unit")
+    p.add_argument("--units", help="units of the columns, converted to SI on reading, e.g. "
+                   "force=mN,time=ms,displacement=um; time s|ms|us, displacement m|mm|um|nm, "
+                   "force N|mN|uN|nN (µ accepted); over a '# units:' line and the header's")
+    p.add_argument("--force-sign", type=int, choices=(1, -1), default=1,
+                   help="-1: the instrument records compression as negative force; flip it")
+    p.add_argument("--fix", action="append", metavar="NAME=VALUE",
+                   help="hold a parameter at a known value in SI units instead of fitting it, "
+                   "e.g. --fix viscosity=1e-3 (names: E_star, viscosity, z0, stiffening, "
+                   "relaxation_time, offset); repeat or separate with commas")
     p.add_argument("--out", help="JSON output (one object, or a list for several traces)")
     p.add_argument("--table", help="also write a CSV table, one row per trace")
     p.add_argument(
@@ -293,6 +316,44 @@ def _spec_options(args, n_traces):
                 fit_offset=not args.no_offset), shared
 
 
+def _fixed_option(args, spec: ModelSpec, shared) -> dict:
+    """--fix NAME=VALUE[,NAME=VALUE] (repeatable) as {name: float}; UsageError if bad."""
+    fixed = {}
+    for item in ",".join(args.fix or []).split(","):
+        if not item.strip():
+            continue
+        name, eq, value = item.partition("=")
+        name = name.strip()
+        if not eq:
+            raise UsageError(f"--fix: write NAME=VALUE (e.g. viscosity=1e-3), got {item!r}")
+        if name not in spec.names:
+            raise UsageError(f"--fix: unknown parameter {name!r} for this model (allowed: "
+                             f"{', '.join(spec.names)})")
+        if name == "offset" and args.no_offset:
+            raise UsageError("--fix offset: --no-offset already holds it at 0")
+        if name in fixed:
+            raise UsageError(f"--fix: {name} is given twice")
+        if name in shared:
+            raise UsageError(f"--fix {name}: it is also in --shared; fit it jointly or fix it")
+        try:
+            fixed[name] = float(value)
+        except ValueError:
+            raise UsageError(f"--fix {name}: {value.strip()!r} is not a number") from None
+    return fixed
+
+
+def _start_warnings(traces, spec: ModelSpec, fixed: dict) -> list[str]:
+    """Implausible starting values (from the physics, before any fitting): a unit slip."""
+    out = []
+    for tr in traces:
+        scales = scales_from_trace(tr, spec.drive)  # also refuses a force negative in compression
+        values = {n: v for n, v in initial_guess(tr, scales, spec).values.items()
+                  if n not in fixed}
+        for flag in plausibility_flags(values, scales.speed):
+            out.append(f"{os.path.basename(tr.name)}: before fitting, from the data: {flag}")
+    return out
+
+
 def _run(args) -> int:
     check_distinct_inputs(args.traces, "trace")
     spec_kw, shared = _spec_options(args, len(args.traces))
@@ -328,9 +389,17 @@ def _run(args) -> int:
         sys.stderr.flush()
 
     comparison = None
+    read_kw = dict(force_sign=args.force_sign)
+    if args.columns is not None:
+        read_kw["columns"] = parse_columns(args.columns, "--columns")
+    if args.units is not None:
+        read_kw["units"] = parse_units(args.units, "--units")
     try:
-        traces = [read_trace(path) for path in args.traces]
+        traces = [read_trace(path, **read_kw) for path in args.traces]
         spec = ModelSpec(drive=_common_drive(traces, args.drive), **spec_kw)
+        fixed = _fixed_option(args, spec, shared)
+        for line in _start_warnings(traces, spec, fixed):
+            sys.stderr.write(f"{PROG}: warning: {line}\n")
         prepare_outputs(outputs)  # creates missing folders: only once the inputs are good
         cached = None
         if not args.no_cache:  # a repeated call loads the compiled solver instead of compiling
@@ -340,6 +409,8 @@ def _run(args) -> int:
             if cached else "compiling the solver ..."))
         kw = dict(shared=shared, method=args.method, max_iter=args.max_iter, noise=args.noise,
                   progress=progress)
+        if fixed:
+            kw["fixed"] = fixed
         if settings is not None:
             kw["settings"] = settings
         if args.compare:

@@ -45,7 +45,7 @@ def _information(results) -> dict:
         n += st["n_samples"]
         n_eff += st["n_effective"]
     return dict(log_likelihood=ll, k=k, n=n, n_effective=n_eff,
-                aic=2 * k - 2 * ll, bic=k * math.log(n_eff) - 2 * ll)
+                aic=2 * k - 2 * ll, bic=k * math.log(max(n_eff, 1.0)) - 2 * ll)  # ρ̂ → 1: n_eff → 0
 
 
 def compare(simple_results, rich_results, simple_label="simple", rich_label="rich") -> dict:

@@ -53,7 +53,7 @@ import lubjax
 from lubjax import _compiler, _sharding
 from lubjax._threads import single_threaded_blas
 
-from . import _cache, _model, _stats
+from . import _cache, _checks, _model, _stats
 from ._io import Trace
 from ._model import ModelSpec, Scales
 
@@ -112,6 +112,7 @@ class FitResult(NamedTuple):
     data: np.ndarray  # measured response [N or m]
     model: np.ndarray  # fitted response at the samples
     metadata: dict
+    fixed: tuple = ()  # the parameters held at given values (``fixed=``): stderr 0
 
     E_star = property(lambda self: self.values["E_star"])
     viscosity = property(lambda self: self.values["viscosity"])
@@ -264,12 +265,15 @@ class _Layout(NamedTuple):
     base: np.ndarray  # (T, P)
     M: list  # per trace (P, n_k)
     labels: list  # per problem: parameter labels of x
+    active: np.ndarray  # (P,) which θ components are fitted (not held fixed)
 
 
-def _layout(groups, spec: ModelSpec, names_of_traces, theta0, shared) -> tuple[_Layout, list]:
-    """Parameter layout and starting x for problems ``groups`` (lists of trace indices)."""
+def _layout(groups, spec: ModelSpec, names_of_traces, theta0, shared,
+            fixed=()) -> tuple[_Layout, list]:
+    """Parameter layout and starting x for problems ``groups`` (lists of trace indices); the
+    ``fixed`` parameters stay at their θ0 like an offset that is not fitted."""
     P = len(spec.names)
-    active = spec.active
+    active = spec.active & np.array([n not in fixed for n in spec.names])
     T = theta0.shape[0]
     problem = np.zeros(T, int)
     base = np.where(active, 0.0, theta0)
@@ -294,7 +298,7 @@ def _layout(groups, spec: ModelSpec, names_of_traces, theta0, shared) -> tuple[_
             x0 += [float(theta0[t, i]) for i in own]
         labels.append(lab)
         x0s.append(np.array(x0))
-    return _Layout(problem, base, M, labels), x0s
+    return _Layout(problem, base, M, labels, active), x0s
 
 
 class _Evaluator:
@@ -604,6 +608,40 @@ def _check_args(traces, method, max_iter, tol, starts):
         raise ValueError(f"starts must have one entry per trace ({len(traces)}), got {len(starts)}")
 
 
+#: Where each parameter must lie: θ is its logarithm (E0/E∞ - 1 for the stiffening).
+_LOWER = {"E_star": 0.0, "viscosity": 0.0, "z0": 0.0, "stiffening": 1.0,
+          "relaxation_time": 0.0}
+
+
+def _check_value(name: str, value, what: str) -> float:
+    """``value`` as a float inside its parameter's range (ValueError naming ``what`` if not)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = math.nan
+    lo = _LOWER.get(name, -math.inf)
+    if not (math.isfinite(v) and v > lo):
+        rule = f"a finite number > {lo:g}" if math.isfinite(lo) else "a finite number"
+        raise ValueError(f"{what}: {name} must be {rule} (SI units), got {value!r}")
+    return v
+
+
+def _check_fixed(fixed, spec: ModelSpec, shared) -> dict:
+    """``fixed`` as {name: SI value}, checked against the spec and ``shared``."""
+    out = {}
+    for name, value in dict(fixed or {}).items():
+        if name not in spec.names:
+            raise ValueError(f"fixed: unknown parameter {name!r} (allowed: "
+                             f"{', '.join(spec.names)})")
+        if name in shared:
+            raise ValueError(f"fixed: {name} is also shared; a parameter is fitted jointly or "
+                             "held fixed, not both")
+        out[name] = _check_value(name, value, "fixed")
+    if all(n in out for n, a in zip(spec.names, spec.active, strict=True) if a):
+        raise ValueError("fixed: every parameter is held fixed; nothing is left to fit")
+    return out
+
+
 def _spec_for(traces, spec, drive, substrate_kw):
     if spec is not None:
         return spec
@@ -634,6 +672,7 @@ def fit_traces(
     progress=None,
     devices: int | None = None,
     batching: str = "auto",
+    fixed: dict | None = None,
 ) -> list[FitResult]:
     """Fit traces: each on its own (default), or jointly with ``shared`` parameters.
 
@@ -661,6 +700,9 @@ def fit_traces(
         batching: how each device evaluates its traces: "map" (one after another, each with its
             own steps, finished fits skipped), "vmap" (all at once) or "auto" (default: "map" on
             CPU, "vmap" on an accelerator; ``lubjax._sharding.batching_mode``).
+        fixed: parameters held at known values, {name: SI value} (e.g. {"viscosity": 1e-3} when
+            the medium is known): not fitted, their standard error 0; any of ``spec.names``
+            except a shared one.
     """
     _check_args(traces, method, max_iter, tol, starts)
     _sharding.batching_mode(batching)
@@ -674,9 +716,17 @@ def fit_traces(
         raise ValueError(f"shared: unknown parameter(s) {', '.join(unknown)} (allowed: {allowed})")
     if noise not in _stats.NOISE_MODELS:
         raise ValueError(f"noise must be one of {', '.join(_stats.NOISE_MODELS)}, got {noise!r}")
+    fixed = _check_fixed(fixed, spec, shared)
     scales = [_model.scales_from_trace(tr, spec.drive) for tr in traces]
     if starts is None:
         starts = [initial_guess(tr, s, spec) for tr, s in zip(traces, scales, strict=True)]
+    if fixed:
+        note = "held fixed: " + ", ".join(f"{n} = {v:g}" for n, v in fixed.items())
+        starts = [Start({**st.values, **fixed}, (*st.notes, note)) for st in starts]
+    for tr, st in zip(traces, starts, strict=True):  # θ holds logarithms: no value <= 0 gets in
+        for n in spec.names:
+            if n != "stiffening":  # θ clamps E0/E∞ - 1 at 1e-6 (an elastic start is fine)
+                _check_value(n, st.values.get(n), f"{tr.name or 'trace'}: starting value")
     groups = [list(range(len(traces)))] if shared else [[t] for t in range(len(traces))]
     t0 = time.perf_counter()
     solver = _model.make_solver(settings)
@@ -685,7 +735,7 @@ def fit_traces(
     theta0 = np.array([[_model.to_theta(n, st.values[n], sc.response_unit) for n in spec.names]
                        for st, sc in zip(starts, scales, strict=True)])
     names = [_short_name(tr.name) for tr in traces]
-    layout, x0s = _layout(groups, spec, names, theta0, shared)
+    layout, x0s = _layout(groups, spec, names, theta0, shared, tuple(fixed))
     evaluate = _Evaluator(data, solver, spec, layout, groups, n_dev, batching)
     n_samples = [sum(traces[t].time.size for t in g) for g in groups]
 
@@ -719,7 +769,8 @@ def fit_traces(
             start = _start_used(starts[t], spec, layout, t, x0s[k], scales[t], joint)
             results.append(_trace_result(traces[t], spec, scales[t], start, layout, t, o,
                                          summary, j, members, names, shared, method,
-                                         evaluate.runs, wall, model[t, : traces[t].time.size]))
+                                         evaluate.runs, wall, model[t, : traces[t].time.size],
+                                         fixed))
     return results
 
 
@@ -764,19 +815,23 @@ def _stack_traces(traces, scales, spec, mesh):
 
 
 def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, members, names,
-                  shared, method, runs, wall, model) -> FitResult:
+                  shared, method, runs, wall, model, fixed=None) -> FitResult:
     """Map a problem's x, covariance and statistics onto trace t's parameters (SI)."""
     M = layout.M[t]
     theta = layout.base[t] + M @ outcome.x
     values, stderr, deriv = {}, {}, np.zeros(len(spec.names))
+    fixed = fixed or {}
     for i, n in enumerate(spec.names):
         values[n], deriv[i] = _model.to_physical(n, float(theta[i]), scales.response_unit)
+    values.update(fixed)  # exactly as given, not through exp(log(value))
     cov_theta = M @ summary["covariance"] @ M.T
-    active = spec.active
+    active = layout.active
     cov_theta[~active, :] = np.nan
     cov_theta[:, ~active] = np.nan
     for i, n in enumerate(spec.names):
-        stderr[n] = float(abs(deriv[i]) * math.sqrt(cov_theta[i, i])) if active[i] else 0.0
+        # A near-singular JᵀJ can leave a variance <= 0 or NaN: no standard error, not an error.
+        var = float(cov_theta[i, i])
+        stderr[n] = (abs(deriv[i]) * math.sqrt(var) if var >= 0 else math.nan) if active[i] else 0.0
     se = np.sqrt(np.diag(cov_theta))
     corr = cov_theta / np.outer(se, se)
     parts = {}
@@ -807,6 +862,8 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
     if not outcome.converged:
         flags.append("fit did not converge: treat the values and errors as unreliable")
     flags += summary["flags"]
+    flags += _checks.plausibility_flags(
+        {n: v for n, v in values.items() if n not in fixed}, scales.speed)
     return FitResult(
         name=trace.name, spec=spec, values=values, stderr=stderr, correlation=corr,
         shared=tuple(s for s in shared if len(members) > 1),
@@ -814,7 +871,7 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
         scales=scales, stats=stats, converged=outcome.converged, identifiable=identifiable,
         n_iterations=outcome.iterations, n_model_runs=runs, method=method, wall_s=wall,
         start=start, flags=tuple(flags), time=trace.time, data=_channel(trace, spec),
-        model=model, metadata=dict(trace.metadata),
+        model=model, metadata=dict(trace.metadata), fixed=tuple(fixed),
     )
 
 

@@ -63,7 +63,7 @@ import lubjax
 from lubjax import _compiler, _sharding
 from lubjax._indenter import motion_start
 
-from ._io import Trace
+from ._io import Trace, check_force_sign
 
 DRIVES = ("travel", "spring", "force")
 LAYER_BASES = ("bonded", "frictionless")
@@ -210,8 +210,10 @@ def _channels(trace: Trace, drive: str):
 
 def scales_from_trace(trace: Trace, drive: str | None = None) -> Scales:
     """d_c, t_c, t_on and the ramp (see module docstring). ValueError if the input does not
-    ramp up and settle into a hold."""
+    ramp up and settle into a hold, or the force is negative in compression
+    (:func:`fitting._io.check_force_sign`)."""
     drive = drive_of(trace, drive)
+    check_force_sign(trace, drive)
     t = trace.time
     u, y, ucol, ycol = _channels(trace, drive)
     n = t.size

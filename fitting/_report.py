@@ -7,6 +7,7 @@ import os
 
 import numpy as np
 
+from ._checks import plausibility_flags
 from ._fit import FitResult
 
 #: (JSON key, display unit, display scale) of each parameter; the offset's depends on the channel.
@@ -54,7 +55,10 @@ def _finite(x):
 
 
 def result_to_dict(res: FitResult) -> dict:
-    """A JSON-ready summary of a fit (SI units; keys as documented in data/README.md)."""
+    """A JSON-ready summary of a fit (SI units; keys as documented in data/README.md).
+
+    ``plausible`` is False when E*, η or the ramp speed lies outside soft lubricated contact
+    (:mod:`fitting._checks`); the flags then name the likely unit mistake."""
     names = res.spec.names
     resp_unit = "N" if res.spec.response == "force" else "m"
     out = {"trace": res.name}
@@ -90,6 +94,9 @@ def result_to_dict(res: FitResult) -> dict:
         method=res.method,
         wall_s=res.wall_s,
         flags=list(res.flags),
+        fixed=list(res.fixed or ()),
+        plausible=not plausibility_flags(
+            {n: v for n, v in res.values.items() if n not in (res.fixed or ())}, res.scales.speed),
         start={**{units(res, n)[0]: res.start.values[n] for n in names},
                "notes": list(res.start.notes)},
         metadata=dict(res.metadata),
@@ -120,7 +127,7 @@ def _value_line(res, n):
     key, unit, scale = units(res, n)
     v, e = res.values[n] / scale, res.stderr[n] / scale
     rel = f"({100 * e / abs(v):.2f}%)" if v and n not in NEAR_ZERO else ""
-    tag = " (shared)" if n in res.shared else ""
+    tag = " (shared)" if n in res.shared else " (fixed)" if n in (res.fixed or ()) else ""
     start = res.start.values[n] / scale
     line = (f"    {n:<16s} = {v:<11.6g} +/- {e:<10.3g} {rel:<9s} {unit:<8s} "
             f"(init = {start:.5g}){tag}")
@@ -196,5 +203,7 @@ def fit_report(res: FitResult, min_correl: float = 0.1) -> str:
 def short_value(res: FitResult, n: str) -> str:
     _, unit, scale = units(res, n)
     v, e = res.values[n] / scale, res.stderr[n] / scale
+    if n in (res.fixed or ()):
+        return f"{v:.4g} {unit} (fixed)" if unit else f"{v:.4g} (fixed)"
     text = f"{v:.4g} ± {e:.2g}" if not math.isnan(e) else f"{v:.4g}"
     return f"{text} {unit}" if unit else text
