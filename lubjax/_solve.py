@@ -456,7 +456,7 @@ class Result:
             h̄(0) and min h̄. A film error near the film itself says the mesh does not resolve
             that film (late thin necks at large β t̄).
         accepted, rejected: step counts. compile_s, run_s: wall time of compilation (0 when
-        cached) and of the run itself.
+            cached) and of the run itself.
     """
 
     beta: float

@@ -1,0 +1,22 @@
+"""mkdocs hook: serve the figures that the benchmarks and examples write, from where they are.
+
+The PNGs live in ``benchmarks/out/`` and ``examples/out/`` (their scripts write them there); a
+copy under ``docs/`` would go stale the next time a script is re-run. Pages refer to them as
+``figures/<name>.png``.
+"""
+
+from pathlib import Path
+
+from mkdocs.structure.files import File
+
+FIGURE_DIRS = ("benchmarks/out", "examples/out")
+
+
+def on_files(files, config):
+    root = Path(config["config_file_path"]).parent
+    for folder in FIGURE_DIRS:
+        for png in sorted((root / folder).glob("*.png")):
+            files.append(
+                File.generated(config, f"figures/{png.name}", abs_src_path=str(png))
+            )
+    return files
