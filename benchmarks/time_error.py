@@ -8,8 +8,8 @@ the difference is time error only: max |ΔF̄|/peak, where it is largest, and th
 (2) ``--fits``: paper_dc140's fit (data/paper_dc140.csv) at the fits' default settings and at
 rtol 3e-5 and 1e-5: (fitted - true)/standard error of E*, η, z0, and its noise-free twin
 (data/clean/paper_dc140_clean.csv) at the default, to see whether a z-score comes from the fit's
-discretisation or from the noise draw. Writes benchmarks/out/time_error.md. For the
-README's paragraph on why z̄0 = 2 is off at rtol 1e-3 (issue "Error control").
+discretisation or from the noise draw. Writes benchmarks/out/time_error.md. The time error
+it isolates is what the mobility's second stage corrects (docs/design.md, "mobility").
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@ Optimisers (``method=``):
   from data/paper_dc140.csv's physics start the zoom line search stalls in that roughness at
   FIT_SETTINGS' rtol 3e-4, χ² 5.8 above the optimum after 60 iterations (not converged); with
   ``settings=dataclasses.replace(FIT_SETTINGS, rtol=1e-5)`` (CLI: ``--rtol 1e-5``) it converges
-  in 20 (benchmarks/fit_benchmark.py --only optimisers, README "Optimisers").
+  in 20 (benchmarks/fit_benchmark.py --only optimisers, docs/accuracy.md, "Optimisers").
 
 Convergence: the Gauss–Newton decrement gᵀ(JᵀJ)⁻¹g with g = Jᵀr, in units of the residual variance
 s² = 2S/(n - p), below ``tol`` (1e-4): the remaining step is under 1 % of a standard error. An

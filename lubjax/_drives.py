@@ -1,6 +1,6 @@
 r"""Drives: what moves the sphere. A scene picks exactly one.
 
-The semi-discrete Reynolds equation (MODEL.md, "Drives") is
+The semi-discrete Reynolds equation (docs/model.md, "Drives") is
 
     A (dz̄/dt̄ 1 + Ŵ dp̄/dt̄) = β T(h̄) p̄,                                   (R)
 
@@ -30,7 +30,7 @@ step's time derivative is the BDF formula a₀yⁿ⁺¹ + a₁yⁿ + a₂yⁿ⁻
   No cavitation: on rebound the pressure turns negative and stays in the model, as in Davis
   et al.
 
-Dimensionless numbers, all with the relaxation test's scales (MODEL.md eq 7): lengths d_c,
+Dimensionless numbers, all with the relaxation test's scales (docs/model.md, eq 7): lengths d_c,
 time t_c, force F_s = 2E* d_c^{3/2} √R/π (F = F_s F̄), so that β keeps its meaning as
 E* d_c^{5/2} t_c/(6π η R^{3/2} d_c). Which d_c and t_c a scene uses is its choice (the SI layer,
 :mod:`lubjax._units`, says which): for creep under a load F0 ramped in t_r it takes d_c = the Hertz

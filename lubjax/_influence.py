@@ -27,7 +27,7 @@ Departures from the paper (eq 21), and why:
   0.18 (growth - 1)² at z̄0 = 2, so a growth of 1.05 was needed, half the nodes of the mesh).
   ψ(ū)·(linear) follows a (1 + ū²/2)⁻² tail exactly and a (z̄ + ū²/2)⁻² one to
   O(|z̄ - 1| (growth-1)²/ū²), so the outer cells can grow by 1.15-1.5
-  (tests/test_analytic_limits.py: the rigid squeeze film; README, Accuracy). Inside the fine
+  (tests/test_analytic_limits.py: the rigid squeeze film; docs/accuracy.md). Inside the fine
   zone ψ changes by ≲ 2 % across a cell: the representation stays second order there, with
   errors measured no larger than plain hats'.
 

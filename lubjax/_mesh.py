@@ -2,7 +2,7 @@
 
 The paper (Section 5) uses a uniform mesh on [0, 4] with p̄(L̄) = 0. That truncation drops the
 r̄⁻⁴ pressure tail of the squeeze film: the fraction z̄/(z̄ + L̄²/2) of the force (6-20 % for
-L̄ = 4, see MODEL.md). We instead default to a *graded* mesh: uniform and fine where the contact
+L̄ = 4, see docs/model.md). We instead default to a *graded* mesh: uniform and fine where the contact
 lives, then geometrically coarser out to a large L̄, so the truncation costs a few dozen nodes.
 """
 

@@ -28,9 +28,9 @@ class SolverError(RuntimeError):
     """A run produced NaN or a negative film, or could not reach t_end: see the message."""
 
 
-#: Parameter ranges the solver accepts. Inside them the stepper was mapped (README, stability
-#: map: β ∈ [0.1, 10⁶] × z̄0 ∈ [0.05, 5] to t̄ = 10⁶); outside, the thin-film scales overflow
-#: float64 long before any physics changes.
+#: Parameter ranges the solver accepts. Inside them the stepper was mapped (docs/accuracy.md,
+#: stability map: β ∈ [0.1, 10⁶] × z̄0 ∈ [0.05, 5] to t̄ = 10⁶); outside, the thin-film scales
+#: overflow float64 long before any physics changes.
 BETA_RANGE = (1e-4, 1e9)
 Z0_RANGE = (1e-4, 1e3)
 T_END_MAX = 1e9
@@ -54,7 +54,7 @@ def _mesh_from_tolerance(rtol: float) -> tuple[float, float, float]:
     (z̄0 > 1) is less kind: its elastic recovery gives an r̄⁻⁵ tail that the weight does not
     follow, and its decay rate, so F̄ pointwise late in the tail, was 4.1e-3 off at growth 1.25,
     7.4e-4 at 1.1 (β = 1, 10, z̄0 = 2, dr 0.014, time tolerance 1e-6; benchmarks/accuracy.py's
-    references). The domain truncation ≈ 4z̄/L̄² of the force (MODEL.md) is kept below rtol/8
+    references). The domain truncation ≈ 4z̄/L̄² of the force (docs/model.md) is kept below rtol/8
     for z̄ ≤ 1."""
     scale = (rtol / DEFAULT_RTOL) ** 0.25
     dr = min(0.05, max(0.002, 0.014 * scale))
@@ -159,7 +159,7 @@ class Settings:
             |error| ≤ atol + rtol·|h̄|, on F̄, |error| ≤ 1e-12 + rtol·max(|F̄|,
             force_floor × peak), and on a free gap z̄ (force control, spring, free sphere),
             |error| ≤ atol + rtol·max|z̄ - z̄_start|. The global error is a few times rtol
-            (README tables).
+            (docs/accuracy.md).
         dr: mesh spacing in the fine zone [0, r_fine] (default: from rtol).
         r_fine: edge of the uniform fine zone (covers the Hertz radius √(1-z̄0) ≤ 1 and its rim).
         length: domain length L̄ with p̄(L̄) = 0; force truncation ≈ 4z̄/L̄² (default: from rtol).
@@ -448,7 +448,7 @@ class Result:
             h̄(0) and min h̄. A film error near the film itself says the mesh does not resolve
             that film (late thin necks at large β t̄).
         accepted, rejected: step counts. compile_s, run_s: wall time of compilation (0 when
-        cached) and of the run itself.
+            cached) and of the run itself.
     """
 
     beta: float

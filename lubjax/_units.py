@@ -150,7 +150,7 @@ class CreepTest:
     """A creep test in SI units: a load ramped from 0 to ``load`` in ``ramp_time``, then held,
     on a sphere that starts at rest at the gap ``gap``.
 
-    Scales (MODEL.md, "Drives"): d_c = δ∞, Hertz's indentation under the load, and
+    Scales (docs/model.md, "Drives"): d_c = δ∞, Hertz's indentation under the load, and
     t_c = ``ramp_time``, so that the dimensionless load plateau is F̄ = 2π/3 and the gap tends to
     z̄ = -1 (the approach z0 + δ∞). β = E* d_c^{3/2} t_c/(6π η R^{3/2}) keeps the meaning of eq 8e
     with the speed d_c/t_c.

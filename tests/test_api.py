@@ -39,7 +39,7 @@ def test_poisson_ratio_range(nu):
 
 
 def test_dimensionless_groups_of_the_paper_experiment():
-    """Section 3.2 / MODEL.md: E = 2.94 MPa, ν = 0.5, η = 100 Pa s, R = 2 mm, v0 = 0.1 mm/s,
+    """Section 3.2 / docs/model.md: E = 2.94 MPa, ν = 0.5, η = 100 Pa s, R = 2 mm, v0 = 0.1 mm/s,
     z0 = 140 μm, d_c = 140 μm gives z̄0 = 1 and β ≈ 54."""
     test = lubjax.RelaxationTest.from_E(
         2.94e6, 0.5, radius=2e-3, viscosity=100.0, speed=1e-4, indent=140e-6, gap=140e-6

@@ -42,7 +42,7 @@ def test_stiff_spring_recovers_prescribed_travel():
 
 
 def _rigid_creep_gap(beta, load, t):
-    """Reynolds under a load ramped to F̄0 over t̄ ∈ [0, 1]: F̄ = π(-dz̄/dt̄)/(2βz̄) (MODEL.md),
+    """Reynolds under a load ramped to F̄0 over t̄ ∈ [0, 1]: F̄ = π(-dz̄/dt̄)/(2βz̄) (docs/model.md),
     so ln(z̄/z̄0) = -(2β/π) ∫F̄ dt̄."""
     impulse = load * np.where(t < 1, t**2 / 2, t - 0.5)
     return np.exp(-2 * beta / np.pi * impulse)

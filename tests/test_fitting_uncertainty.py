@@ -3,9 +3,9 @@
 The draws are a clean trace of the fine generator (data/clean/: rtol 1e-7, 544 nodes) plus
 noise; the fit runs at rtol 1e-3 (143 nodes) on the first t̄ ≤ 3 of the trace, so the solver's
 own error is part of the budget (benchmarks/fit_coverage.py: the same with more draws and the
-table of the README). With N = 24 draws the rms z of honest errors scatters by ≈ ±0.14 around 1,
-so the window 0.8–1.2 of the issue is about ±1.4 of that scatter: the seeds are fixed, and the
-benchmark's 60 draws are the firmer number.
+table of docs/accuracy.md). With N = 24 draws the rms z of honest errors scatters by ≈ ±0.14
+around 1, so the window 0.8–1.2 of the issue is about ±1.4 of that scatter: the seeds are
+fixed, and the benchmark's 60 draws are the firmer number.
 """
 
 import numpy as np

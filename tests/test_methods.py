@@ -1,5 +1,5 @@
 """Cheap checks of the benchmark methods (benchmarks/methods): the paper-scheme port reproduces
-MODEL.md's numbers, and the fully implicit Newton step agrees with lubjax's linearly implicit
+docs/model.md's numbers, and the fully implicit Newton step agrees with lubjax's linearly implicit
 step on a small case."""
 
 import sys
@@ -29,7 +29,7 @@ def test_paper_influence_constant_pressure_disc():
 
 
 def test_paper_scheme_reproduces_model_numbers():
-    # MODEL.md: β=100, z̄0=0.5, Δr̄=0.02, L̄=4, Δt̄=2e-3 gives F̄(1) ≈ 0.906, F̄(5) ≈ 0.780.
+    # docs/model.md: β=100, z̄0=0.5, Δr̄=0.02, L̄=4, Δt̄=2e-3 gives F̄(1) ≈ 0.906, F̄(5) ≈ 0.780.
     # Same equations at a shorter horizon, eliminated form (identical up to rounding).
     t_out = np.array([0.0, 0.5, 1.0])
     f, info = paper_scheme.run(100.0, 0.5, t_out, dr=0.02, length=4.0, dt=2e-3, reduced=True)

@@ -1,0 +1,32 @@
+"""mkdocs hooks: serve the figures that the benchmarks and examples write, from where they are,
+and drop the Sphinx roles that docstrings put before their cross-references.
+
+The PNGs live in ``benchmarks/out/`` and ``examples/out/`` (their scripts write them there); a
+copy under ``docs/`` would go stale the next time a script is re-run. Pages refer to them as
+``figures/<name>.png``.
+"""
+
+import re
+from pathlib import Path
+
+from mkdocs.structure.files import File
+
+FIGURE_DIRS = ("benchmarks/out", "examples/out")
+
+#: A Sphinx role before inline code, as the docstrings write cross-references
+#: (":func:`relax`"); mkdocstrings renders the code but leaves the role as text.
+SPHINX_ROLE = re.compile(r":(?:class|func|meth|mod|data|attr|obj):(?=<code>)")
+
+
+def on_files(files, config):
+    root = Path(config["config_file_path"]).parent
+    for folder in FIGURE_DIRS:
+        for png in sorted((root / folder).glob("*.png")):
+            files.append(
+                File.generated(config, f"figures/{png.name}", abs_src_path=str(png))
+            )
+    return files
+
+
+def on_page_content(html, page, config, files):
+    return SPHINX_ROLE.sub("", html)
