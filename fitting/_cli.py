@@ -72,7 +72,7 @@ columns (any order; other columns only with --columns):
   force_N             the normal force [N], positive when pushing back (under
                       --drive force: the prescribed load)
 The full description: the trace file format page of the documentation,
-docs/formats.md."""
+docs/guide/trace-format.md."""
 #: Runnable examples ending --help (the data/ folder of the lubjax sources holds these traces).
 EXAMPLES = (
     "lubjax-fit data/paper_dc140.csv --out fit.json --plot fit.png",
@@ -218,7 +218,7 @@ def build_parser() -> Parser:
         "row, force (positive when pushed back). Other exports: --columns maps their cells,\n"
         "--units declares units (or a '# units: force=mN' line, or '(mN)' in a header cell),\n"
         "lines before the header row are skipped. The trace file format page of the\n"
-        "documentation (docs/formats.md) has it all.",
+        "documentation (docs/guide/trace-format.md) has it all.",
         epilog=_epilog(),
     )
     p.add_argument("traces", nargs="+", help="trace file(s)")

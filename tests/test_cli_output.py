@@ -199,7 +199,7 @@ def test_fit_help_states_the_format_and_ends_with_examples(capsys):
     assert fcli.main(["--help"]) == 0
     out = capsys.readouterr().out
     for item in ("time_s", "displacement_m", "force_N", "# radius_m:",
-                 "the trace file format page of the documentation,\ndocs/formats.md"):
+                 "the trace file format page of the documentation,\ndocs/guide/trace-format.md"):
         assert item in out
     assert "README" not in out
     assert len(_examples(out, "lubjax-fit")) >= 2
