@@ -10,8 +10,10 @@ drive (travel, sampled travel with a smooth start, load, spring, free sphere) an
 (half-space, bonded layer, viscoelastic) at orders 1, 2 and 3, the error estimate's runs, the
 reverse mode (``force_curve`` and its gradient) and a ``vmap`` batch. For each scene: the accepted
 and rejected steps of both revisions, whether every array is bitwise identical, and otherwise the
-largest difference relative to the array's largest value. Exits 1 if any scene differs in its
-step counts or by more than ``--limit`` (default 1e-12). Writes benchmarks/out/same_answers.md.
+largest difference relative to the array's largest value; and the bytes of the loop's state,
+what reverse mode stores per attempt. Exits 1 if any scene differs in its step counts or by more
+than ``--limit`` (default 1e-12), or if B's state is larger. Writes
+benchmarks/out/same_answers.md.
 """
 
 from __future__ import annotations
@@ -77,8 +79,29 @@ def _scenes(quick: bool):
                        devices=1, batching="vmap")
         return {"force": np.asarray(res.force), "film_min": np.asarray(res.film_min)}
 
+    def state_bytes(lj):
+        """Bytes of the loop's state, what reverse mode stores per attempt (N = 200 nodes, no
+        profiles): elastic and viscoelastic, orders 2 and 3."""
+        import importlib
+
+        loop = importlib.import_module("lubjax._stepper")
+        if not hasattr(loop, "_initial_state"):  # the loop in its own module
+            loop = importlib.import_module("lubjax._rollout")
+        disc = lj.discretise(lj.uniform_mesh(0.05, 10.0))
+        out = []
+        for substrate in (lj.HalfSpace(), visco(lj)):
+            for order in (2, 3):
+                tol = lj.Tolerance(order=order)
+                shape = jax.eval_shape(
+                    lambda s, t: loop._initial_state(disc, 100.0, lj.Travel(), s, 0.5, t,
+                                                     jnp.zeros((0,))), substrate, tol)
+                out.append(sum(x.size * x.dtype.itemsize for x in jax.tree_util.tree_leaves(
+                    shape)))
+        return {"state_bytes": np.array(out)}
+
     noest = {"error_estimate": False}
     scenes = {
+        "loop state bytes (elastic o2, o3; viscoelastic o2, o3)": state_bytes,
         "default relax(100, 0.5, 5), estimate on": run(100.0, 0.5, 5.0, profile_times=[0.5, 2.0]),
         "order 1, relax(100, 0.5, 5)": run(100.0, 0.5, 5.0, settings={"order": 1, **noest}),
         "order 3, relax(100, 0.5, 5)": run(100.0, 0.5, 5.0, settings={"order": 3, **noest},
@@ -144,6 +167,14 @@ def compare(a: dict, b: dict, limit: float) -> tuple[list[str], bool]:
     ok = True
     for name in names:
         keys = [k for k in a if k.startswith(name + "::")]
+        if keys == [name + "::state_bytes"]:  # a cost, not an answer: B must be no larger
+            x, y = a[keys[0]], b.get(keys[0])
+            smaller = y is not None and x.shape == y.shape and bool(np.all(y <= x))
+            ok &= smaller
+            lines.append(f"| {name} | {', '.join(map(str, x))} | "
+                         f"{'—' if y is None else ', '.join(map(str, y))} | — | "
+                         f"{'B no larger' if smaller else 'B LARGER'} |")
+            continue
         same, worst, where = True, 0.0, ""
         for k in keys:
             x, y = a[k], b.get(k)

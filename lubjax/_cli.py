@@ -100,36 +100,23 @@ LAYER_BASES = ("bonded", "frictionless")
 #: A run shorter than this shows no progress line; the line is redrawn this often.
 PROGRESS_AFTER_S = 2.0
 PROGRESS_EVERY_S = 0.5
-#: (function of lubjax.relax, what it is doing): the innermost match names the phase.
-_PHASES = (
-    ("_compiled_rollouts", "compiling the solver (or loading it from the cache)"),
-    ("evaluate_host", "estimating the error"),
-    ("relax", "running the solver and its error estimate"),
-)
-
-
-def _phase(thread_id: int) -> str:
-    """What the solver call on thread ``thread_id`` is doing, read off that thread's stack (the
-    compiled time loop cannot report from inside, so the phase is all there is to show)."""
-    frame = sys._current_frames().get(thread_id)
-    names = set()
-    while frame is not None:
-        names.add(frame.f_code.co_name)
-        frame = frame.f_back
-    return next((phase for code, phase in _PHASES if code in names), "working")
-
-
 @contextlib.contextmanager
 def progress_line(what: str, stream=None):
-    """While the body runs, a line "[elapsed] what: phase ..." redrawn on ``stream`` (stderr)
-    once the body has taken :data:`PROGRESS_AFTER_S`; only when ``stream`` is a terminal, so a
-    redirected log gets no control characters. The line is cleared at the end."""
+    """A line "[elapsed] what: phase ..." redrawn on ``stream`` (stderr) once the body has taken
+    :data:`PROGRESS_AFTER_S`, only when ``stream`` is a terminal (a redirected log gets no
+    control characters); cleared at the end. Yields the callable to pass as ``relax``'s
+    ``progress``, which names the phase shown."""
     stream = sys.stderr if stream is None else stream
+    phase = ["starting"]
+
+    def tell(name: str) -> None:
+        phase[0] = name
+
     isatty = getattr(stream, "isatty", None)
     if not (callable(isatty) and isatty()):
-        yield
+        yield tell
         return
-    worker, start, done = threading.get_ident(), time.perf_counter(), threading.Event()
+    start, done = time.perf_counter(), threading.Event()
     shown = False
 
     def draw():
@@ -137,7 +124,7 @@ def progress_line(what: str, stream=None):
         if done.wait(PROGRESS_AFTER_S):
             return
         while not done.is_set():
-            line = f"[{time.perf_counter() - start:6.1f} s] {what}: {_phase(worker)} ..."
+            line = f"[{time.perf_counter() - start:6.1f} s] {what}: {phase[0]} ..."
             width = shutil.get_terminal_size().columns - 1
             stream.write("\r\033[K" + line[:width])
             stream.flush()
@@ -147,7 +134,7 @@ def progress_line(what: str, stream=None):
     ticker = threading.Thread(target=draw, daemon=True)
     ticker.start()
     try:
-        yield
+        yield tell
     finally:
         done.set()
         ticker.join()
@@ -168,6 +155,14 @@ def _parser() -> Parser:
     p = Parser(prog=PROG, description=DESCRIPTION, epilog=_epilog("lubjax"))
     add_debug_flag(p)
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for add in (_add_relax_command, _add_creep_command, _add_bounce_command):
+        command = add(sub)
+        _add_cache_flag(command)
+        add_debug_flag(command)
+    return p
+
+
+def _add_relax_command(sub):
     r = sub.add_parser(
         "relax",
         help="simulate a ramp-and-hold relaxation test",
@@ -209,9 +204,10 @@ def _parser() -> Parser:
                    help="1: backward Euler, 2: BDF2 (default), 3: BDF3")
     r.add_argument("--out", help="write results as JSON here")
     r.add_argument("--plot", help="write a force / film figure here (.png, .pdf, .svg, ...)")
-    _add_cache_flag(r)
-    add_debug_flag(r)
+    return r
 
+
+def _add_creep_command(sub):
     c = sub.add_parser(
         "creep",
         help="simulate a creep test: a load ramped and held (force control)",
@@ -229,9 +225,10 @@ def _parser() -> Parser:
     c.add_argument("--gap", type=float, help="initial gap z0 [m]")
     _add_substrate(c)
     _add_accuracy(c)
-    _add_cache_flag(c)
-    add_debug_flag(c)
+    return c
 
+
+def _add_bounce_command(sub):
     b = sub.add_parser(
         "bounce",
         help="simulate a free sphere colliding with the substrate through the film",
@@ -252,9 +249,7 @@ def _parser() -> Parser:
                    help="end time [s] (default 20 x0/V)")
     _add_substrate(b)
     _add_accuracy(b)
-    _add_cache_flag(b)
-    add_debug_flag(b)
-    return p
+    return b
 
 
 def _add_material(p):
@@ -554,9 +549,10 @@ def _creep(args) -> int:
     profile_times = sorted({min(1.0, t_end), t_end})
     if line:
         print(f"substrate: {line}")
-    with progress_line("creep"):
+    with progress_line("creep") as phase:
         res = relax(test.beta, test.z0_bar, t_end, drive=test.drive(history),
-                    settings=settings, profile_times=profile_times, substrate=substrate)
+                    settings=settings, profile_times=profile_times, substrate=substrate,
+                    progress=phase)
     out = _drive_json(res, test.scales, test.gap)
     out.update(load_N=test.load, hertz_indentation_m=test.indent,
                settings=dataclasses.asdict(settings), substrate=record)
@@ -599,14 +595,15 @@ def _bounce(args) -> int:
     # Profiles at the end and at impact (the peak force): the impact is found by the run, so a
     # plot takes a second run for its profiles, with as many profile times (the same program)
     # and no error estimate (the steps, and so the series, are the same).
-    with progress_line("bounce"):
+    with progress_line("bounce") as phase:
         res = relax(test.beta, 1.0, t_end, drive=test.drive(), settings=settings,
-                    profile_times=[t_end, t_end], substrate=substrate)
+                    profile_times=[t_end, t_end], substrate=substrate, progress=phase)
         if args.plot:
             impact = float(res.t[np.argmax(res.force)])
             again = relax(test.beta, 1.0, t_end, drive=test.drive(),
                           settings=dataclasses.replace(settings, error_estimate=False),
-                          profile_times=[impact, t_end], substrate=substrate)
+                          profile_times=[impact, t_end], substrate=substrate,
+                          progress=lambda p: phase(f"profiles at impact: {p}"))
             res = dataclasses.replace(res, profile_times=again.profile_times,
                                       pressure=again.pressure, displacement=again.displacement,
                                       film=again.film)
@@ -738,9 +735,9 @@ def _relax(args) -> int:
     substrate, record, line = _substrate(args, settings, scale)
     profile_times = [t for t in (0.25, 0.5, 1.0, 2.0, t_end) if t <= t_end]
     prepare_outputs(outputs)
-    with progress_line("relax"):
+    with progress_line("relax") as phase:
         res = relax(beta, z0, t_end, settings=settings, profile_times=profile_times,
-                    substrate=substrate)
+                    substrate=substrate, progress=phase)
     out = {
         "beta": beta,
         "z0": z0,

@@ -582,6 +582,7 @@ def relax(
     settings: Settings | None = None,
     profile_times=(),
     check: str = "raise",
+    progress=None,
 ) -> Result:
     """Simulate a relaxation test (paper eqs 8, 11b) in dimensionless form, error-controlled.
 
@@ -600,6 +601,9 @@ def relax(
             interpolant: the steps do not depend on them).
         check: "raise" (default) raises SolverError on NaN, a negative film or a run that did
             not reach t_end; "warn" warns; "flag" only sets the flags of :class:`Result`.
+        progress: None (quiet, the default), or a callable told each phase as it starts
+            ("compiling the solver", "running the solver", "estimating the error"): the
+            command line's progress line shows it.
     """
     _check_x64()
     check_parameters(beta, z0)
@@ -619,7 +623,10 @@ def relax(
         coarse = discretise(mesh.coarsened(), substrate)
         loose = dataclasses.replace(tol, rtol=min(8 * tol.rtol, 0.1))
         runs += [(coarse, tol, ptimes[:0]), (coarse, loose, ptimes[:0])]
+    report = progress if progress is not None else (lambda phase: None)
+    report("compiling the solver")
     compiled, compile_s = _compiled_rollouts(runs, history, substrate)
+    report("running the solver")
     start = time.perf_counter()
     with single_threaded_blas():
         trajs = [
@@ -627,6 +634,8 @@ def relax(
             for fn, (d, t, pt) in zip(compiled, runs)
         ]
     run_s = time.perf_counter() - start
+    if settings.error_estimate:
+        report("estimating the error")
     result = _result_of(trajs, disc, beta, z0, t_end, ptimes, tol.max_steps, compile_s, run_s)
     if not result.ok and check != "flag":
         msg = f"relax(beta={beta}, z0={z0}): " + "; ".join(result.problems())
