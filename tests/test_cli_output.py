@@ -7,6 +7,7 @@ from __future__ import annotations
 import io
 import os
 import shlex
+import sys
 import time
 from types import SimpleNamespace
 
@@ -311,10 +312,14 @@ def test_relax_progress_line_only_on_a_terminal(monkeypatch, capsys):
     monkeypatch.setattr(lcli, "PROGRESS_EVERY_S", 0.01)
 
     def relax(*args, progress, **kwargs):  # tells its phases as the solver's relax does
-        progress("compiling the solver")
-        time.sleep(0.2)
-        progress("running the solver")
-        time.sleep(0.2)
+        for phase in ("compiling the solver", "running the solver"):
+            progress(phase)
+            # hold the phase until the line shows it (a loaded machine schedules the redraw
+            # late), or 0.2 s where stderr is not a terminal
+            deadline = time.perf_counter() + (10.0 if sys.stderr.isatty() else 0.2)
+            while time.perf_counter() < deadline and not (
+                    sys.stderr.isatty() and phase in sys.stderr.getvalue()):
+                time.sleep(0.01)
         return _relax_result()
 
     monkeypatch.setattr(lsolve, "relax", relax)
