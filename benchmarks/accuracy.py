@@ -37,7 +37,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import lubjax  # noqa: E402
 from benchmarks.machine import label, write_report  # noqa: E402
 from lubjax._discretisation import DISCRETISATION  # noqa: E402
-from lubjax._solve import _final_contact_radius  # noqa: E402
+from lubjax._mesh import final_contact_radius  # noqa: E402
 
 BETAS = (1.0, 10.0, 100.0, 1000.0)
 Z0S = (0.5, 0.9, 1.0, 1.11, 2.0)
@@ -81,7 +81,7 @@ def cache_path(beta, z0, tag):
     case, so a change to either (e.g. the contact-edge refinement) computes a new one."""
     settings = CHECKS[tag]
     drive = lubjax.as_drive(lubjax.RampHold())
-    rim = _final_contact_radius(drive, z0, settings.mesh_parameters()[0])
+    rim = final_contact_radius(drive, z0, settings.mesh_parameters()[0])
     key = repr((settings.rtol, settings.atol, settings.mesh(rim).nodes, T_END,
                 DISCRETISATION)).encode()
     digest = hashlib.sha1(key).hexdigest()[:10]

@@ -38,7 +38,7 @@ beta, z0, t_end = 100.0, 0.5, 5.0
 settings = lubjax.Settings()
 history = _solve._drive_of(None, None)
 substrate = as_substrate(None)
-mesh = _solve._relax_mesh(settings, history, z0, beta, t_end)
+mesh = lubjax.mesh_for(settings, drive=history, beta=beta, z0=z0, t_end=t_end)
 programs = {"run": discretise(mesh, substrate), "coarse": discretise(mesh.coarsened(), substrate)}
 tol = settings.tolerance()
 

@@ -38,12 +38,13 @@ import jax  # noqa: E402
 import lubjax  # noqa: E402
 from benchmarks import machine  # noqa: E402
 from benchmarks import work_precision as wp  # noqa: E402
-from lubjax._solve import _relax_mesh  # noqa: E402
 
 SCENES = [(100.0, 0.5, 1.0), (100.0, 0.5, 5.0), (100.0, 2.0, 5.0)]
 BANDS = [(0.0, 0.6), (0.6, 0.85), (0.85, 1.2), (1.2, 1.6), (1.6, 4.0), (4.0, 10.0),
          (10.0, np.inf)]
 TRADE_FACTORS = (1.15, 1.4)
+#: The scenes' drive: the ramp and hold as a prescribed travel (what relax makes of a history).
+RAMP = lubjax.Travel(lubjax.RampHold())
 
 
 def refined(mesh: lubjax.Mesh, lo: float, hi: float) -> lubjax.Mesh:
@@ -63,8 +64,8 @@ def coarsened(mesh: lubjax.Mesh, lo: float, hi: float) -> lubjax.Mesh:
 
 
 def run(mesh, settings, beta, z0, t_end, t_out):
-    plan = lubjax.Plan(lubjax.discretise(mesh), settings.tolerance(), lubjax.RampHold(), t_end,
-                       t_out, mesh)
+    plan = lubjax.Plan(lubjax.stepper.discretise(mesh), settings.tolerance(), lubjax.RampHold(),
+                       t_end, t_out, mesh)
     curve = jax.jit(lambda b, z: lubjax.force_curve(plan, b, z, mode="forward"))
     curve(beta, z0).block_until_ready()
     start = time.perf_counter()
@@ -91,14 +92,14 @@ def main(argv=None):
         ref = ref_all[np.isin(np.round(times, 12), np.round(t_out, 12))]
         for rtol in args.rtols:
             mesh_settings = lubjax.Settings(rtol=rtol, error_estimate=False)
-            base = _relax_mesh(mesh_settings, lubjax.RampHold(), z0, beta, t_end)
+            base = lubjax.mesh_for(mesh_settings, drive=RAMP, beta=beta, z0=z0, t_end=t_end)
             settings = dataclasses.replace(mesh_settings, rtol=args.time_rtol, order=args.order)
             variants = [("base", base)]
             if args.trade:
                 dr = mesh_settings.mesh_parameters()[0]
                 for factor in TRADE_FACTORS:
                     coarser = dataclasses.replace(mesh_settings, dr=dr * factor)
-                    mesh = _relax_mesh(coarser, lubjax.RampHold(), z0, beta, t_end)
+                    mesh = lubjax.mesh_for(coarser, drive=RAMP, beta=beta, z0=z0, t_end=t_end)
                     variants.append((f"Δr̄ × {factor:g}, split [1.6, 10]",
                                      refined(mesh, 1.6, 10.0)))
             else:

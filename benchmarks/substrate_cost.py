@@ -47,7 +47,7 @@ def main(argv=None):
     for label, substrate in cases:
         print(label, "...", file=sys.stderr, flush=True)
         start = time.perf_counter()
-        lubjax.discretise(mesh, substrate)
+        lubjax.stepper.discretise(mesh, substrate)
         build = time.perf_counter() - start
         first = lubjax.relax(100, 0.5, 5.0, substrate=substrate, settings=settings)
         runs = [lubjax.relax(100, 0.5, 5.0, substrate=substrate, settings=settings)

@@ -51,9 +51,9 @@ def viscoelastic_map(quick):
 
     def one(m, tau):
         solid = lubjax.Viscoelastic.standard_linear_solid(m, tau)
-        traj = lubjax.rollout(plan.disc, beta, z0, plan.drive, plan.t_end, plan.tol,
+        traj = lubjax.stepper.rollout(plan.disc, beta, z0, plan.drive, plan.t_end, plan.tol,
                               substrate=solid, mode="forward")  # fmt: skip
-        return lubjax.evaluate(traj.steps, plan.t, "force"), traj.finished
+        return lubjax.stepper.evaluate(traj.steps, plan.t, "force"), traj.finished
 
     M, T = np.meshgrid(ratios, taus, indexing="ij")
     start = time.perf_counter()

@@ -4,7 +4,7 @@ each rtol gets, against the same mesh continued to a domain 20x longer.
     python benchmarks/truncation.py [--out benchmarks/out/truncation.md]
 
 The truncation drops the r̄⁻⁴ pressure tail, ≈ 4z̄/L̄² of the force (docs/model.md); the mesh rule
-(lubjax._solve._mesh_from_tolerance) keeps that below rtol/8 for z̄ ≤ 1. Cases: β = 100 at
+(lubjax._mesh.mesh_from_tolerance) keeps that below rtol/8 for z̄ ≤ 1. Cases: β = 100 at
 z̄0 ∈ {0.5, 2} (z̄0 = 2 keeps the film widest, z̄ = 1 in the hold), ramp and hold to t̄ = 5, the
 error max |F̄_L - F̄_20L| over 501 times relative to the peak, and pointwise where F̄ > 10⁻⁶ peak.
 Both runs take their time steps at rtol = 1e-7 (TIME_RTOL), so that what differs is the domain

@@ -87,10 +87,11 @@ def fig3_refinement(out):
         print(f"  refinement: {label}", file=sys.stderr)
         if settings is None:
             mesh = lubjax.uniform_mesh(0.01, 4.0)
-            traj = lubjax.rollout(lubjax.discretise(mesh), 100.0, 0.5, lubjax.RampHold(), 5.0,
-                                  base.tolerance(), profile_times=np.array([5.0]))
+            traj = lubjax.stepper.rollout(lubjax.stepper.discretise(mesh), 100.0, 0.5,
+                                          lubjax.RampHold(), 5.0, base.tolerance(),
+                                          profile_times=np.array([5.0]))
             r, p = mesh.r, np.asarray(traj.profiles[0])
-            curves[label] = np.asarray(lubjax.evaluate(traj.steps, t_common))
+            curves[label] = np.asarray(lubjax.stepper.evaluate(traj.steps, t_common))
         else:
             res = lubjax.relax(100.0, 0.5, t_end=5.0, settings=settings, profile_times=[5.0])
             r, p = res.r, res.pressure[0]

@@ -24,8 +24,11 @@ import tempfile
 import jax
 import numpy as np
 
-from lubjax import _compile_cache, _compiler
-from lubjax._compile_cache import cache_dir  # noqa: F401  (re-exported: tests, users)
+from lubjax._fitting_api import compile_cache as _compile_cache
+from lubjax._fitting_api import compiler as _compiler
+
+#: The cache folder (lubjax/_compile_cache.py; re-exported: tests, users).
+cache_dir = _compile_cache.cache_dir
 
 #: Where enable_compilation_cache pointed the cache (None: off, the library's default).
 _ENABLED: str | None = None
@@ -76,8 +79,11 @@ def _program(name, fn, leaves, treedef):
     key_text = repr((name, str(treedef), [(s.shape, str(s.dtype)) for s in specs],
                      jax.__version__, jax.default_backend(), _source_hash()))
     key = hashlib.sha256(key_text.encode()).hexdigest()[:32]
-    if key in _LOADED:
-        return _LOADED[key]
+    return _compiler.cached(_LOADED, key, lambda: _load_or_export(key, fn, specs, treedef))[0]
+
+
+def _load_or_export(key, fn, specs, treedef):
+    """The stored program of ``key`` (exported afresh if missing or unreadable), jitted."""
     folder = os.path.join(_ENABLED, "exported")
     path = os.path.join(folder, key + ".bin")
     program = None
@@ -101,5 +107,4 @@ def _program(name, fn, leaves, treedef):
         with os.fdopen(fd, "wb") as fh:  # written whole, then renamed: readers never see half
             fh.write(program.serialize())
         os.replace(tmp, path)
-    _LOADED[key] = _compiler.jit(program.call)
-    return _LOADED[key]
+    return _compiler.jit(program.call)

@@ -50,8 +50,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import lubjax
-from lubjax import _compiler, _sharding
-from lubjax._threads import single_threaded_blas
+from lubjax._fitting_api import compiler as _compiler
+from lubjax._fitting_api import sharding as _sharding
+from lubjax._fitting_api import single_threaded_blas
 
 from . import _cache, _checks, _model, _stats
 from ._io import Trace
@@ -791,8 +792,8 @@ def _solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, groups):
     settings = _model.FIT_SETTINGS if settings is None else settings
     mesh = settings.mesh().coarsened()
     tol = settings.tolerance()
-    loose = _model.Solver(lubjax.discretise(mesh), dataclasses.replace(tol, rtol=min(8 * tol.rtol,
-                                                                                       0.1)))
+    loose = _model.Solver(lubjax.stepper.discretise(mesh),
+                          dataclasses.replace(tol, rtol=min(8 * tol.rtol, 0.1)))
     data = _stack_traces(traces, scales, spec, mesh)
     # The response alone (no Jacobian): a forward run, a quarter of the cost and of the tracing.
     predict = evaluate.batched(1, "predict")

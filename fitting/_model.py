@@ -1,7 +1,7 @@
 r"""From SI parameters to the measured response at the sample times of a trace, and its Jacobian.
 
 One model for every experiment: a **drive** (what the instrument prescribes) and a **substrate**
-(what the sphere presses into) go to the same error-controlled ``lubjax.rollout``:
+(what the sphere presses into) go to the same error-controlled ``lubjax.stepper.rollout``:
 
 * ``"travel"`` (position control): input ``displacement_m``, response ``force_N``,
   ``lubjax.Travel(d̄(t̄))``;
@@ -60,13 +60,15 @@ import jax.numpy as jnp
 import numpy as np
 
 import lubjax
-from lubjax import _compiler, _sharding
-from lubjax._indenter import motion_start
+from lubjax._fitting_api import checks as _checks
+from lubjax._fitting_api import compiler as _compiler
+from lubjax._fitting_api import motion_start
+from lubjax._fitting_api import sharding as _sharding
 
 from ._io import Trace, check_force_sign
 
 DRIVES = ("travel", "spring", "force")
-LAYER_BASES = ("bonded", "frictionless")
+LAYER_BASES = lubjax.LAYER_BASES
 
 #: Accuracy of the model inside fits: the solver's own error control at rtol = 3e-4 (132
 #: nodes; the solver's default 1e-4 has 177). At 1e-3 the model of paper_dc140 at the true
@@ -111,12 +113,9 @@ class ModelSpec:
                 raise ValueError(
                     f"layer must be (thickness_m, poisson, base), got {self.layer!r}"
                 ) from None
-            if not (math.isfinite(h) and h > 0):
-                raise ValueError(f"layer thickness must be finite and > 0 (metres), got {h!r}")
-            if not -1.0 < nu <= 0.5:
-                raise ValueError(f"layer Poisson ratio must be in (-1, 0.5], got {nu!r}")
-            if base not in LAYER_BASES:
-                raise ValueError(f"layer base must be 'bonded' or 'frictionless', got {base!r}")
+            _checks.check_quantity("layer thickness", h, "metres")
+            _checks.check_poisson("layer Poisson ratio", nu)
+            _checks.check_layer_base("layer base", base)
             object.__setattr__(self, "layer", (h, nu, base))
 
     @property
@@ -176,12 +175,13 @@ class Scales(NamedTuple):
     input_end: float  # u_end: final travel [m] or final load [N]
 
     def beta(self, E_star, viscosity):
-        """β = E* d_c^{3/2} t_c/(6π η R^{3/2}) (eq 8e with v0 = d_c/t_c)."""
-        return E_star * self.indent**2.5 / (6 * math.pi * viscosity * self.speed * self.radius**1.5)
+        """β = E* d_c^{3/2} t_c/(6π η R^{3/2}) (eq 8e with v0 = d_c/t_c: ``lubjax.si_scales``)."""
+        return lubjax.si_scales(E_star, self.radius, self.indent, speed=self.speed,
+                                viscosity=viscosity)["beta"]
 
     def force_scale(self, E_star):
-        """F/F̄ = 2 E* d_c^{3/2} √R/π (eq 11b)."""
-        return 2 * E_star * self.indent**1.5 * math.sqrt(self.radius) / math.pi
+        """F/F̄ = 2 E* d_c^{3/2} √R/π (eq 11b: ``lubjax.si_scales``)."""
+        return lubjax.si_scales(E_star, self.radius, self.indent, speed=self.speed)["force_N"]
 
 
 def drive_of(trace: Trace, drive: str | None = None) -> str:
@@ -280,15 +280,15 @@ class TraceData(NamedTuple):
     response_unit: jax.Array  # y_u: the offset's unit
     noise: jax.Array  # σ: the residuals' unit
     drive_unit: jax.Array  # load F_end/force_scale_unit, or π k/(2√(R d_c)); ÷ E* gives the drive's
-    disc: lubjax.Discretisation | None  # a layer's own influence matrix (None: the solver's)
+    disc: lubjax.stepper.Discretisation | None  # a layer's own influence matrix (None: solver's)
 
 
 class Solver(NamedTuple):
     """What every trace of a batch shares: the mesh arrays and the tolerance (its numbers are
     leaves, its order and step budget static)."""
 
-    disc: lubjax.Discretisation
-    tol: lubjax.Tolerance
+    disc: lubjax.stepper.Discretisation
+    tol: lubjax.stepper.Tolerance
 
 
 def history(trace: Trace, scales: Scales, drive: str) -> lubjax.SampledTravel:
@@ -310,7 +310,7 @@ def history(trace: Trace, scales: Scales, drive: str) -> lubjax.SampledTravel:
 def make_solver(settings=None) -> Solver:
     """Mesh arrays (cached per mesh) and tolerance of ``settings`` (default ``FIT_SETTINGS``)."""
     settings = FIT_SETTINGS if settings is None else settings
-    return Solver(lubjax.discretise(settings.mesh()), settings.tolerance())
+    return Solver(lubjax.stepper.discretise(settings.mesh()), settings.tolerance())
 
 
 def _pad_history(hist: lubjax.SampledTravel, n: int) -> lubjax.SampledTravel:
@@ -324,7 +324,7 @@ def _pad_history(hist: lubjax.SampledTravel, n: int) -> lubjax.SampledTravel:
 def layer_substrate(spec: ModelSpec, scales: Scales):
     """The ``lubjax.Layer`` of a spec with a layer: H̄ = H/√(R d_c) of this trace."""
     h, nu, base = spec.layer
-    return lubjax.Layer(h / math.sqrt(scales.radius * scales.indent), nu, base)
+    return lubjax.Layer(lubjax.layer_thickness_bar(h, scales.radius, scales.indent), nu, base)
 
 
 def trace_data(
@@ -376,7 +376,7 @@ def trace_data(
 
 def _layer_disc(mesh, layer):
     try:
-        return lubjax.discretise(mesh, layer)
+        return lubjax.stepper.discretise(mesh, layer)
     except ImportError as exc:  # lubjax/_layer.py (the layer's influence matrix) is missing
         raise RuntimeError(
             f"the layer substrate needs the layer's influence matrix (lubjax/_layer.py), which "
@@ -433,12 +433,12 @@ def _stepper_output(u, data: TraceData, solver: Solver, spec: ModelSpec, mode: s
     z0_bar = jnp.exp(u[1]) / data.indent
     E_star = jnp.exp(u[2]) if spec.drive != "travel" else None
     disc = solver.disc if data.disc is None else data.disc
-    traj = lubjax.rollout(
+    traj = lubjax.stepper.rollout(
         disc, beta, z0_bar, _drive(spec, data, E_star), data.t_end, solver.tol,
         substrate=_substrate(spec, u, data), mode=mode,
     )
     channel = "force" if spec.response == "force" else "gap"
-    y = lubjax.evaluate(traj.steps, data.t_data, channel)
+    y = lubjax.stepper.evaluate(traj.steps, data.t_data, channel)
     film = jnp.min(jnp.where(traj.steps.accepted, traj.steps.film_min, jnp.inf))
     return y, jnp.where(traj.finished, film, -jnp.inf)
 

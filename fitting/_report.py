@@ -7,6 +7,8 @@ import os
 
 import numpy as np
 
+import lubjax
+
 from ._checks import plausibility_flags
 from ._fit import FitResult
 
@@ -106,7 +108,8 @@ def result_to_dict(res: FitResult) -> dict:
         nu = float(res.metadata.get("poisson_ratio"))
     except (TypeError, ValueError):
         nu = None
-    if nu is not None and -1 < nu <= 0.5:
+    lo, hi = lubjax.POISSON_RANGE
+    if nu is not None and lo < nu <= hi:
         out["E_Pa"] = res.E_star * (1 - nu**2)
         out["stderr"]["E_Pa"] = res.stderr["E_star"] * (1 - nu**2)
     true = truth(res)

@@ -11,6 +11,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+from . import stepper  # noqa: E402
 from ._analytic import (  # noqa: E402
     hertz_displacement,
     hertz_force,
@@ -18,28 +19,23 @@ from ._analytic import (  # noqa: E402
     rigid_squeeze_force,
     rigid_squeeze_pressure,
 )
-from ._compile_cache import enable_compilation_cache  # noqa: E402
-from ._controller import Tolerance  # noqa: E402
-from ._discretisation import (  # noqa: E402
-    Discretisation,
-    discretise,
-    displacement,
-    film_thickness,
+from ._checks import (  # noqa: E402
+    BETA_RANGE,
+    LAYER_BASES,
+    POISSON_RANGE,
+    Z0_RANGE,
+    check_parameters,
 )
+from ._compile_cache import enable_compilation_cache  # noqa: E402
 from ._drives import FreeSphere, Load, Spring, Travel, as_drive, restitution  # noqa: E402
 from ._indenter import RampHold, SampledTravel  # noqa: E402
-from ._influence import force_weights, influence_matrix, kernel  # noqa: E402
-from ._layer import layer_influence_matrix, layer_thickness_bar  # noqa: E402
-from ._mesh import Mesh, graded_mesh, uniform_mesh  # noqa: E402
-from ._rollout import State, Step, Trajectory, evaluate, rollout  # noqa: E402
+from ._layer import layer_thickness_bar  # noqa: E402
+from ._mesh import Mesh, graded_mesh, mesh_for, uniform_mesh  # noqa: E402
 from ._solve import (  # noqa: E402
-    BETA_RANGE,
-    Z0_RANGE,
     Plan,
     Result,
     Settings,
     SolverError,
-    check_parameters,
     force_curve,
     make_plan,
     relax,
@@ -54,19 +50,40 @@ from ._units import (  # noqa: E402
     hertz_indentation,
     plane_strain_modulus,
     reduced_radius,
+    si_scales,
 )
 
+# The stepper toolkit lives in lubjax.stepper; these names stay importable here too (not in
+# __all__) for code written against the flat namespace.
+from .stepper import (  # noqa: E402, F401
+    Discretisation,
+    State,
+    Step,
+    Tolerance,
+    Trajectory,
+    discretise,
+    displacement,
+    evaluate,
+    film_thickness,
+    force_weights,
+    influence_matrix,
+    kernel,
+    layer_influence_matrix,
+    rollout,
+)
+
+#: The user API. The stepper toolkit (rollout, discretise, evaluate, ...) is lubjax.stepper.
 __all__ = [
     "BETA_RANGE",
     "Collision",
     "CreepTest",
-    "Z0_RANGE",
-    "Discretisation",
     "FreeSphere",
     "HalfSpace",
+    "LAYER_BASES",
     "Layer",
     "Load",
     "Mesh",
+    "POISSON_RANGE",
     "Plan",
     "RampHold",
     "RelaxationTest",
@@ -75,40 +92,31 @@ __all__ = [
     "Settings",
     "SolverError",
     "Spring",
-    "State",
-    "Step",
     "SweepResult",
-    "Tolerance",
-    "Trajectory",
     "Travel",
     "Viscoelastic",
+    "Z0_RANGE",
     "as_drive",
     "check_parameters",
     "contact_modulus",
-    "discretise",
-    "displacement",
     "enable_compilation_cache",
-    "evaluate",
-    "film_thickness",
     "force_curve",
-    "force_weights",
     "graded_mesh",
     "hertz_displacement",
     "hertz_force",
     "hertz_indentation",
     "hertz_pressure",
-    "influence_matrix",
-    "kernel",
-    "layer_influence_matrix",
     "layer_thickness_bar",
     "make_plan",
+    "mesh_for",
     "plane_strain_modulus",
     "reduced_radius",
     "relax",
-    "rigid_squeeze_force",
     "restitution",
+    "rigid_squeeze_force",
     "rigid_squeeze_pressure",
-    "rollout",
+    "si_scales",
+    "stepper",
     "sweep",
     "uniform_mesh",
 ]

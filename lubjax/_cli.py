@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from . import _checks
 from ._files import (
     EXIT_EPILOG,
     MAX_TRAVEL_OVER_RADIUS,
@@ -94,7 +95,7 @@ def _epilog(command: str) -> str:
 
 
 SI_NAMES = ("E_star", "E", "poisson", "viscosity", "radius", "speed", "indent", "gap")
-LAYER_BASES = ("bonded", "frictionless")
+LAYER_BASES = _checks.LAYER_BASES
 
 
 #: A run shorter than this shows no progress line; the line is redrawn this often.
@@ -362,8 +363,10 @@ def _substrate(args, settings, scale):
         nu = args.layer_poisson
         if nu is None:
             nu = args.poisson if args.poisson is not None else 0.5
-        if not (math.isfinite(nu) and -1.0 < nu <= 0.5):
-            raise UsageError(f"--layer-poisson must be in (-1, 0.5], got {nu:g}")
+        try:
+            _checks.check_poisson("--layer-poisson", nu)
+        except ValueError:
+            raise UsageError(f"--layer-poisson must be in (-1, 0.5], got {nu:g}") from None
         layer = Layer(layer_thickness_bar(args.thickness, radius, d_c), nu,
                       args.layer_base or "bonded")
         try:  # the matrix's cost depends on the mesh length only: refuse a too thin layer now
@@ -763,12 +766,7 @@ def _relax(args) -> int:
             h_min_m=(res.film_min * test.indent).tolist(),
             h_center_m=(res.film_center * test.indent).tolist(),
             force_error_N=(res.force_error * test.force_scale).tolist(),
-            scales={
-                "time_s": test.time_scale,
-                "force_N": test.force_scale,
-                "length_m": test.length_scale,
-                "pressure_Pa": test.pressure_scale,
-            },
+            scales={k: test.scales[k] for k in ("time_s", "force_N", "length_m", "pressure_Pa")},
         )
     if line:
         print(f"substrate: {line}")

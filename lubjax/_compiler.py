@@ -15,12 +15,19 @@ So lubjax asks for the classic ones, per program (``compiler_options``, never th
 :func:`compile_all` compiles several programs (``relax``'s run and its error estimate's coarse-mesh
 run) in threads: XLA releases the GIL while it compiles, so the second program is traced while
 the first compiles, and on two cores both compile at once.
+
+:func:`cached` and :func:`cached_all` keep compiled programs across calls: ``relax``'s
+(lubjax/_solve.py), ``sweep``'s (lubjax/_sweep.py) and the fits' stored programs
+(fitting/_cache.py). Each caller owns its dict of programs and its key (what shapes the program:
+mesh size, tree structure, leaf shapes, ...); the helpers build what is missing and say how long
+that took, so a call can report its compile time apart (0 when everything was cached).
 """
 
 from __future__ import annotations
 
 import functools
 import os
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import jax
@@ -68,3 +75,28 @@ def compile_all(lowerers) -> list:
     with ThreadPoolExecutor(max_workers=min(len(lowerers), os.cpu_count() or 1)) as pool:
         futures = [pool.submit(compile_one, lower()) for lower in lowerers]
         return [f.result() for f in futures]
+
+
+def cached(programs: dict, key, build):
+    """``programs[key]``, built by ``build()`` (and stored) if it is not there yet. Returns
+    (program, seconds spent building: 0.0 when cached)."""
+    if key in programs:
+        return programs[key], 0.0
+    start = time.perf_counter()
+    programs[key] = build()
+    return programs[key], time.perf_counter() - start
+
+
+def cached_all(programs: dict, keys, lowerers) -> tuple[list, float]:
+    """The programs of ``keys`` (one per entry of ``lowerers``, zero-argument callables that
+    trace and lower one program each): the missing ones are compiled side by side
+    (:func:`compile_all`) and stored in ``programs``. Returns (programs, seconds spent: 0.0
+    when all were cached)."""
+    keys = list(keys)
+    missing = {k: lower for k, lower in zip(keys, lowerers) if k not in programs}
+    seconds = 0.0
+    if missing:
+        start = time.perf_counter()
+        programs.update(zip(missing, compile_all(missing.values())))
+        seconds = time.perf_counter() - start
+    return [programs[k] for k in keys], seconds

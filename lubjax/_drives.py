@@ -47,12 +47,14 @@ arrays) are leaves, so they can be differentiated, fitted and batched like β an
 from __future__ import annotations
 
 import dataclasses
+import math
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._checks import check_number
 from ._indenter import RampHold
+from ._pytree import register
 
 
 def _check_history(history, name):
@@ -61,25 +63,6 @@ def _check_history(history, name):
             f"{name} must be a history such as lubjax.RampHold() or lubjax.SampledTravel(t, "
             f"values), got {type(history).__name__}"
         )
-
-
-def _is_concrete(x):
-    return not isinstance(x, jax.core.Tracer)
-
-
-def _check_number(name, value, lo=None, hi=None, lo_open=False):
-    """Validate a concrete scalar (tracers pass: they were validated when built)."""
-    if not _is_concrete(value):
-        return
-    if isinstance(value, bool) or np.ndim(value) != 0:
-        raise ValueError(f"{name} must be a scalar number, got {value!r}")
-    v = float(value)
-    if not np.isfinite(v):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    if lo is not None and (v <= lo if lo_open else v < lo):
-        raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo:g}, got {value!r}")
-    if hi is not None and v > hi:
-        raise ValueError(f"{name} must be <= {hi:g}, got {value!r}")
 
 
 class _Drive:
@@ -110,6 +93,12 @@ class _Drive:
     def initial_velocity(self):
         return 0.0
 
+    def final_depth(self, z0):
+        """How deep the sphere ends up pressed into the substrate (d_c units; negative: it
+        stops short of it), for the mesh rule (:func:`lubjax.mesh_for`); None where the drive
+        does not prescribe where it ends (a spring, a free sphere)."""
+        return None
+
     def row(self, step):
         """(α, s, b) of the closing row α F̄ⁿ⁺¹ + s Δz̄ = b for the step ``step``
         (:class:`lubjax._stepper.StepRecord`: tⁿ = ``step.t`` → tⁿ⁺¹ = ``step.t_new``, Δt̄, the
@@ -134,6 +123,12 @@ class Travel(_Drive):
 
     def __post_init__(self):
         _check_history(self.history, "Travel(history)")
+
+    def final_depth(self, z0):
+        """The largest travel less z̄0 (a sampled history's largest sample)."""
+        samples = getattr(self.history, "travel_samples", None)
+        final = self.history.travel(np.asarray([1e300])) if samples is None else samples
+        return float(np.max(np.asarray(final))) - z0
 
     @property
     def force_nonnegative(self):
@@ -162,7 +157,7 @@ class Load(_Drive):
     prescribes_force = True
 
     def __post_init__(self):
-        _check_number("Load.scale", self.scale, 0.0, lo_open=True)
+        check_number("Load.scale", self.scale, 0.0, lo_open=True)
         _check_history(self.history, "Load(history)")
 
     def initial_gap(self, z0):
@@ -170,6 +165,11 @@ class Load(_Drive):
 
     def load(self, t):
         return self.scale * self.history.travel(t)
+
+    def final_depth(self, z0):
+        """Hertz's indentation under the final load, (3F̄/(2π))^{2/3}."""
+        final = float(np.asarray(self.load(np.asarray([1e300])))[0])
+        return (3.0 * final / (2.0 * math.pi)) ** (2.0 / 3.0)
 
     def row(self, step):
         return 1.0, 0.0, self.load(step.t_new)
@@ -184,7 +184,7 @@ class Spring(_Drive):
     history: object = dataclasses.field(default_factory=RampHold)
 
     def __post_init__(self):
-        _check_number("Spring.stiffness", self.stiffness, 0.0, lo_open=True)
+        check_number("Spring.stiffness", self.stiffness, 0.0, lo_open=True)
         _check_history(self.history, "Spring(history)")
 
     @property
@@ -218,9 +218,9 @@ class FreeSphere(_Drive):
     inertia = True
 
     def __post_init__(self):
-        _check_number("FreeSphere.inverse_mass", self.inverse_mass, 0.0, lo_open=True)
-        _check_number("FreeSphere.velocity", self.velocity)
-        _check_number("FreeSphere.weight", self.weight, 0.0)
+        check_number("FreeSphere.inverse_mass", self.inverse_mass, 0.0, lo_open=True)
+        check_number("FreeSphere.velocity", self.velocity)
+        check_number("FreeSphere.weight", self.weight, 0.0)
 
     @property
     def t_start(self):
@@ -279,23 +279,8 @@ def as_drive(drive_or_history) -> _Drive:
     )
 
 
-def _register(cls, leaves, static=()):
-    def flatten(d):
-        return tuple(getattr(d, n) for n in leaves), tuple(getattr(d, n) for n in static)
-
-    def unflatten(aux, children):
-        obj = object.__new__(cls)
-        for n, v in zip(leaves, children):
-            object.__setattr__(obj, n, v)
-        for n, v in zip(static, aux):
-            object.__setattr__(obj, n, v)
-        return obj
-
-    jax.tree_util.register_pytree_node(cls, flatten, unflatten)
-
-
 # The histories are pytrees themselves (leaves: a sampled history's arrays).
-_register(Travel, ("history",))
-_register(Load, ("scale", "history"))
-_register(Spring, ("stiffness", "history"))
-_register(FreeSphere, ("inverse_mass", "velocity", "weight"))
+register(Travel, ("history",))
+register(Load, ("scale", "history"))
+register(Spring, ("stiffness", "history"))
+register(FreeSphere, ("inverse_mass", "velocity", "weight"))

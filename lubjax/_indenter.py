@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import dataclasses
 
-import jax
 import jax.numpy as jnp
 import numpy as np
+
+from ._pytree import register
 
 
 @dataclasses.dataclass(frozen=True)
@@ -177,26 +178,11 @@ def motion_end(t: np.ndarray, d: np.ndarray) -> float:
     return t[min(exact + 1, t.size - 1)]
 
 
-_SAMPLED_LEAVES = ("t", "travel_samples", "slopes", "breakpoints", "monotone")
-
-
-def _flatten_sampled(h: SampledTravel):
+def _breakpoints_leaf(bp):
     # Validated objects hold a tuple; unflattened ones already hold the leaf (array or tracer).
-    bp = h.breakpoints
-    bp = np.asarray(bp, np.float64) if isinstance(bp, tuple) else bp
-    return (h.t, h.travel_samples, h.slopes, bp, h.monotone), None
+    return np.asarray(bp, np.float64) if isinstance(bp, tuple) else bp
 
 
-def _unflatten_sampled(_, children):
-    # Bypass __post_init__: under jit/vmap the leaves are tracers (validated when first built),
-    # and the breakpoints stay an array.
-    obj = object.__new__(SampledTravel)
-    for name, value in zip(_SAMPLED_LEAVES, children):
-        object.__setattr__(obj, name, value)
-    return obj
-
-
-jax.tree_util.register_pytree_node(SampledTravel, _flatten_sampled, _unflatten_sampled)
-jax.tree_util.register_pytree_node(
-    RampHold, lambda h: ((), h.t_accel), lambda aux, _: RampHold(aux)
-)
+register(SampledTravel, ("t", "travel_samples", "slopes", "breakpoints", "monotone"),
+         leaf={"breakpoints": _breakpoints_leaf})
+register(RampHold, static=("t_accel",))

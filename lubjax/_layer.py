@@ -77,6 +77,7 @@ import math
 import numpy as np
 from scipy.special import itj0y0, j0, j1, jv
 
+from ._checks import check_layer_base, check_poisson, check_positive
 from ._influence import influence_matrix
 from ._mesh import Mesh
 
@@ -108,20 +109,14 @@ def layer_thickness_bar(H: float, R: float, d_c: float) -> float:
     """H̄ = H/√(R d_c): a layer thickness H (m) in the units of r̄ for a sphere of radius R (m)
     and indentation depth d_c (m)."""
     for name, value in (("H", H), ("R", R), ("d_c", d_c)):
-        if isinstance(value, bool) or not (
-            isinstance(value, (int, float, np.floating, np.integer))
-            and math.isfinite(value)
-            and value > 0
-        ):
-            raise ValueError(f"layer_thickness_bar: {name} must be a finite number > 0 (m), "
-                             f"got {value!r}")
+        check_positive(f"layer_thickness_bar: {name}", value, "m")
     return float(H) / math.sqrt(float(R) * float(d_c))
 
 
 def transfer_minus_one(t: np.ndarray, poisson: float, interface: str) -> np.ndarray:
     """C(t) - 1 of (L2), written so that neither e^{2t} overflows nor 1 - C cancels at large t."""
     t = np.asarray(t, dtype=np.float64)
-    if interface == "bonded":
+    if check_layer_base("interface", interface) == "bonded":
         e2 = np.exp(-2.0 * t)
         e4 = e2 * e2
         kappa = 3.0 - 4.0 * poisson
@@ -129,19 +124,18 @@ def transfer_minus_one(t: np.ndarray, poisson: float, interface: str) -> np.ndar
         num = 2.0 * kappa * e4 + (4.0 * t * t + 4.0 * t + kappa * kappa + 1.0) * e2
         den = kappa * (1.0 + e4) + (4.0 * t * t + kappa * kappa + 1.0) * e2
         return -num / den
-    if interface == "frictionless":
-        # Small t: C = 2 sinh²t/(sinh 2t + 2t) has no cancellation; large t: exponential form.
-        # (At t = 0 exactly, C = 0: ts = 1 there only keeps 0/0 out of the unused branch.)
-        small = t < 1.0
-        ts = np.where(small & (t > 0), t, 1.0)
-        tl = np.where(small, 1.0, t)
-        c_small = 2.0 * np.sinh(ts) ** 2 / (np.sinh(2.0 * ts) + 2.0 * ts) - 1.0
-        c_small = np.where(t > 0, c_small, -1.0)
-        e2l = np.exp(-2.0 * tl)
-        e4l = e2l * e2l
-        c_large = 2.0 * (e4l - (1.0 + 2.0 * tl) * e2l) / (1.0 - e4l + 4.0 * tl * e2l)
-        return np.where(small, c_small, c_large)
-    raise ValueError(f"interface must be 'bonded' or 'frictionless', got {interface!r}")
+    # frictionless. Small t: C = 2 sinh²t/(sinh 2t + 2t) has no cancellation; large t: the
+    # exponential form.
+    # (At t = 0 exactly, C = 0: ts = 1 there only keeps 0/0 out of the unused branch.)
+    small = t < 1.0
+    ts = np.where(small & (t > 0), t, 1.0)
+    tl = np.where(small, 1.0, t)
+    c_small = 2.0 * np.sinh(ts) ** 2 / (np.sinh(2.0 * ts) + 2.0 * ts) - 1.0
+    c_small = np.where(t > 0, c_small, -1.0)
+    e2l = np.exp(-2.0 * tl)
+    e4l = e2l * e2l
+    c_large = 2.0 * (e4l - (1.0 + 2.0 * tl) * e2l) / (1.0 - e4l + 4.0 * tl * e2l)
+    return np.where(small, c_small, c_large)
 
 
 def transfer(t: np.ndarray, poisson: float, interface: str) -> np.ndarray:
@@ -269,14 +263,9 @@ def layer_influence_matrix(
     Cached per (mesh, H̄, ν, interface); returned read-only. Raises ValueError for a layer too
     thin for the mesh (the k̄ quadrature would exceed ``MAX_NODES``).
     """
-    thickness = float(thickness)
-    poisson = float(poisson)
-    if not (math.isfinite(thickness) and thickness > 0):
-        raise ValueError(f"layer thickness must be a finite number > 0, got {thickness!r}")
-    if not (-1.0 < poisson <= 0.5):
-        raise ValueError(f"layer poisson must be in (-1, 0.5], got {poisson!r}")
-    if interface not in ("bonded", "frictionless"):
-        raise ValueError(f"interface must be 'bonded' or 'frictionless', got {interface!r}")
+    thickness = check_positive("layer thickness", float(thickness))
+    poisson = check_poisson("layer poisson", float(poisson))
+    check_layer_base("interface", interface)
     half = influence_matrix(mesh, weighted=False)
     w = half + layer_correction(mesh, thickness, poisson, interface)
     w.setflags(write=False)

@@ -4,6 +4,10 @@ The paper (Section 5) uses a uniform mesh on [0, 4] with p̄(L̄) = 0. That trun
 r̄⁻⁴ pressure tail of the squeeze film: the fraction z̄/(z̄ + L̄²/2) of the force (6-20 % for
 L̄ = 4, see docs/model.md). We instead default to a *graded* mesh: uniform and fine where the contact
 lives, then geometrically coarser out to a large L̄, so the truncation costs a few dozen nodes.
+
+The **mesh rule** (:func:`mesh_for`) is here too: the spacing, growth and length a tolerance
+gets (:func:`mesh_from_tolerance`), and how much a run refines the edge and the interior of the
+contact it ends in, for the thin film a long hold drains to.
 """
 
 from __future__ import annotations
@@ -12,6 +16,8 @@ import dataclasses
 import math
 
 import numpy as np
+
+from ._checks import T_END_MAX, check_number, check_parameters
 
 
 @dataclasses.dataclass(frozen=True)
@@ -137,3 +143,146 @@ def graded_mesh(
             break
         nodes.append(nxt)
     return Mesh(tuple(float(x) for x in nodes))
+
+
+#: The default tolerance, and the mesh it gets (Settings: dr = 0.014, growth 1.05, L̄ = 577).
+DEFAULT_RTOL = 1e-4
+
+
+def mesh_from_tolerance(rtol: float) -> tuple[float, float, float]:
+    """(dr, mesh growth, L̄) for a tolerance, so that the spatial error stays below the time
+    error. The force's spatial error is ∝ dr^{1.7-2} (tests/test_convergence.py fits the order)
+    and falls steeply with the outer cells' growth, while the global time error is ∝ rtol^{2/3}
+    (tests/test_stepper.py): both mesh sizes ∝ rtol^{1/4} keeps the two in
+    step (a rule ∝ √rtol refined far too fast below 1e-4: 52 s for a t̄ ≤ 5 run at 1e-5). The
+    growth 1.15 at the default: with the squeeze-film weight of the pressure representation
+    (lubjax/_influence.py) and the radius inside the conductance's mean (_stepper), the far
+    field's error during a ramp falls steeply with the growth (the rigid squeeze film is within
+    2.5e-4 at growth 1.3, tests/test_analytic_limits.py; it was 0.18 (growth - 1)² of F̄ with
+    plain hats, so 1.05 was needed: 271 nodes where 1.15 needs 177). The hold of an open film
+    (z̄0 > 1) is less kind: its elastic recovery gives an r̄⁻⁵ tail that the weight does not
+    follow, and its decay rate, so F̄ pointwise late in the tail, was 4.1e-3 off at growth 1.25,
+    7.4e-4 at 1.1 (β = 1, 10, z̄0 = 2, dr 0.014, time tolerance 1e-6; benchmarks/accuracy.py's
+    references). The domain truncation ≈ 4z̄/L̄² of the force (docs/model.md) is kept below rtol/8
+    for z̄ ≤ 1."""
+    scale = (rtol / DEFAULT_RTOL) ** 0.25
+    dr = min(0.05, max(0.002, 0.014 * scale))
+    growth = 1.0 + min(0.5, max(0.02, 0.15 * scale))
+    length = max(100.0, math.sqrt(100.0 / (3.0 * rtol)))
+    return dr, growth, length
+
+
+#: Late in a hold the neck at the contact edge thins as h̄_min ≈ NECK_CONSTANT/√(β t̄)
+#: (measured: h̄_min √(β t̄) = 0.12-0.28 for β ∈ [10, 10⁴], z̄0 ∈ [0.05, 0.9], t̄ ∈ [10, 10³];
+#: the larger value is taken, so a neck is thought resolvable rather than not).
+NECK_CONSTANT = 0.3
+
+
+def final_contact_radius(drive, z0, dr) -> float | None:
+    """Edge of the Hertz contact the drive ends in (dimensionless), from the depth it ends at
+    (``drive.final_depth(z̄0)``): √(depth) for an indentation depth ≥ 0; 0 (refine the axis)
+    when the sphere stops short of the surface by less than 50 dr², where the pressure spot,
+    ≈ √(2 z̄) wide, would span fewer than ~10 cells; None otherwise (no contact, nothing thin
+    to resolve), and for a drive that does not know where it ends (a spring, a free sphere)."""
+    depth = drive.final_depth(z0)
+    if depth is None:
+        return None
+    if depth >= 0:
+        return math.sqrt(depth)
+    return 0.0 if -depth < 50.0 * dr**2 else None
+
+
+def _neck_resolvable(beta, t_end, rim_dr) -> bool:
+    """Whether the neck a hold ends with (width ≈ h̄_min^{2/3}) is at least a quarter of the
+    refined cell ``rim_dr``. Below that the film inside the contact is thinner than the
+    O(dr²) error of w̄ there and only zigzags from node to node (seen at β = 10⁶ held to t̄ = 10⁶,
+    h̄_min ~ 10⁻⁷): refining then buys no accuracy, only 10× the steps, so it is not done."""
+    neck = (NECK_CONSTANT / math.sqrt(beta * t_end)) ** (2.0 / 3.0)
+    return neck >= 0.25 * rim_dr
+
+
+#: The trapped film's spatial error inside a contact: |Δh̄(0)|/h̄(0) ≈ DIMPLE_ERROR Δr̄_c²/h̄_min
+#: for an interior spacing Δr̄_c, with h̄_min ≈ NECK_CONSTANT/√(β t̄_end) (measured against the
+#: converged references of benchmarks/accuracy.py at z̄0 = 0.5: 1.0e-3 at β = 100, t̄ = 5 and
+#: 3.8 %, 1.6 %, 0.31 % at β = 10³, t̄ = 10³ with Δr̄_c = 0.014, 0.0093, 0.0047; the rule
+#: gives 8.5e-4 and 4.4 %, 2.0 %, 0.49 %).
+DIMPLE_ERROR = 0.068
+#: ... and the interior is refined until that is at most DIMPLE_TARGET × rtol (0.3 % at the
+#: default rtol, the size of the other errors of the defaults).
+DIMPLE_TARGET = 30.0
+
+
+def _interior_refinement(settings, beta, t_end) -> float:
+    """How much finer than Δr̄ the contact interior needs to be for the trapped film a run ends
+    with: 1 (not at all) for a run that ends before the film under the contact is thin
+    (the default t̄ ≤ 5 run), up to ``Settings.contact_refinement`` for long holds."""
+    dr = settings.mesh_parameters()[0]
+    h_min = NECK_CONSTANT / math.sqrt(beta * t_end)
+    needed = dr * math.sqrt(DIMPLE_ERROR / (DIMPLE_TARGET * settings.rtol * h_min))
+    return min(settings.contact_refinement, max(1.0, needed))
+
+
+#: The late neck's spatial error: |Δh̄_min|/h̄_min ≈ NECK_ERROR (Δr̄_rim/w)^NECK_ORDER for a rim
+#: spacing Δr̄_rim and a neck of width w ≈ h̄_min^{2/3} (measured against the converged
+#: references of benchmarks/accuracy.py: 1.8 % and 0.3 % at β = 10³, t̄ = 10³ with 2.2 and 4.5
+#: cells across the neck; 0.38 % at β = 10³, t̄ = 5 with 4.6 cells). Held to DIMPLE_TARGET × rtol
+#: like the trapped film: ~5 cells across the neck at the default rtol.
+NECK_ERROR = 0.12
+NECK_ORDER = 2.35
+
+
+def _rim_refinement(settings, beta, t_end) -> float:
+    """How much finer than Δr̄ the contact's edge needs to be for the neck a run ends with:
+    ~1 for the default t̄ ≤ 5 run (its neck, h̄_min ≈ 0.011 at β = 100, is 4 cells wide),
+    up to ``Settings.rim_refinement`` for long holds at large β."""
+    dr = settings.mesh_parameters()[0]
+    neck = (NECK_CONSTANT / math.sqrt(beta * t_end)) ** (2.0 / 3.0)
+    cells = (NECK_ERROR / (DIMPLE_TARGET * settings.rtol)) ** (1.0 / NECK_ORDER)
+    return min(settings.rim_refinement, max(1.0, dr * cells / neck))
+
+
+def _contact_refinement(settings, drive, z0, beta, t_end) -> float | None:
+    """The radius ``Settings.contact_radius="auto"`` refines around for one run, or None."""
+    if settings.contact_radius != "auto":
+        return None
+    dr = settings.mesh_parameters()[0]
+    rim = final_contact_radius(drive, float(z0), dr)
+    # (outside the fine zone there is nothing to refine: the zone must be widened instead)
+    if rim is None or rim >= 0.95 * settings.r_fine:
+        return None
+    return rim if _neck_resolvable(float(beta), t_end, dr / settings.rim_refinement) else None
+
+
+def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
+    """The mesh :func:`lubjax.relax` runs on for ``settings`` and one run: the tolerance's
+    (``settings.mesh_parameters()``), refined for the contact the run ends in.
+
+    With ``Settings.contact_radius="auto"`` (the default) the edge of the contact the drive
+    ends in (:func:`final_contact_radius`) is refined to what the neck a run ends with needs,
+    and the contact's inside to what the trapped film needs (``NECK_ERROR``,
+    ``DIMPLE_ERROR``): hardly at all for the default t̄ ≤ 5 run, up to ``rim_refinement`` and
+    ``contact_refinement`` for holds to t̄ ~ 10³ at β ≳ 10³. With a number, that radius is
+    refined by the same run-dependent factors; with None, nothing is.
+
+    :func:`lubjax.make_plan`, :func:`lubjax.sweep` and the fits share one mesh across a batch
+    of (β, z̄0): ``settings.mesh()``, refined by the full factors only around a numeric
+    ``Settings.contact_radius``. In long holds to thin films they can therefore differ from
+    ``relax`` (whose mesh follows each run); elsewhere the refinement is ~1 and they agree.
+
+    Args:
+        settings: a :class:`lubjax.Settings`.
+        drive: a drive (``lubjax.Travel(history)``, ``Load``, ``Spring``, ``FreeSphere``;
+            ``lubjax.as_drive(history)`` for a bare history).
+        beta, z0: β and z̄0 of the run. t_end: its final time t̄.
+    """
+    if not callable(getattr(drive, "final_depth", None)):
+        raise TypeError(
+            "drive must be a drive (lubjax.Travel, Load, Spring, FreeSphere; "
+            f"lubjax.as_drive(history) for a history), got {type(drive).__name__}"
+        )
+    check_parameters(beta, z0)
+    check_number("t_end", t_end, 0.0, T_END_MAX, lo_open=True)
+    beta, t_end = float(beta), float(t_end)
+    return settings.mesh(_contact_refinement(settings, drive, z0, beta, t_end),
+                         _interior_refinement(settings, beta, t_end),
+                         _rim_refinement(settings, beta, t_end))

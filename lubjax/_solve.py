@@ -14,11 +14,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _compiler
+from ._checks import (
+    T_END_MAX,
+    check_choice,
+    check_parameters,
+    check_positive,
+)
 from ._controller import DONE, Tolerance, stop_reason
 from ._discretisation import Discretisation, discretise
-from ._drives import Load, Travel, as_drive
+from ._drives import as_drive
 from ._indenter import RampHold, SampledTravel
-from ._mesh import Mesh, graded_mesh
+from ._mesh import DEFAULT_RTOL, Mesh, graded_mesh, mesh_for, mesh_from_tolerance
 from ._rollout import Step, evaluate, evaluate_host, rollout
 from ._substrate import HalfSpace, as_substrate
 from ._threads import single_threaded_blas
@@ -28,125 +34,6 @@ class SolverError(RuntimeError):
     """A run produced NaN or a negative film, or could not reach t_end: see the message."""
 
 
-#: Parameter ranges the solver accepts. Inside them the stepper was mapped (docs/accuracy.md,
-#: stability map: β ∈ [0.1, 10⁶] × z̄0 ∈ [0.05, 5] to t̄ = 10⁶); outside, the thin-film scales
-#: overflow float64 long before any physics changes.
-BETA_RANGE = (1e-4, 1e9)
-Z0_RANGE = (1e-4, 1e3)
-T_END_MAX = 1e9
-
-
-#: The default tolerance, and the mesh it gets (Settings: dr = 0.014, growth 1.05, L̄ = 577).
-DEFAULT_RTOL = 1e-4
-
-
-def _mesh_from_tolerance(rtol: float) -> tuple[float, float, float]:
-    """(dr, mesh growth, L̄) for a tolerance, so that the spatial error stays below the time
-    error. The force's spatial error is ∝ dr^{1.7-2} (tests/test_convergence.py fits the order)
-    and falls steeply with the outer cells' growth, while the global time error is ∝ rtol^{2/3}
-    (tests/test_stepper.py): both mesh sizes ∝ rtol^{1/4} keeps the two in
-    step (a rule ∝ √rtol refined far too fast below 1e-4: 52 s for a t̄ ≤ 5 run at 1e-5). The
-    growth 1.15 at the default: with the squeeze-film weight of the pressure representation
-    (lubjax/_influence.py) and the radius inside the conductance's mean (_stepper), the far
-    field's error during a ramp falls steeply with the growth (the rigid squeeze film is within
-    2.5e-4 at growth 1.3, tests/test_analytic_limits.py; it was 0.18 (growth - 1)² of F̄ with
-    plain hats, so 1.05 was needed: 271 nodes where 1.15 needs 177). The hold of an open film
-    (z̄0 > 1) is less kind: its elastic recovery gives an r̄⁻⁵ tail that the weight does not
-    follow, and its decay rate, so F̄ pointwise late in the tail, was 4.1e-3 off at growth 1.25,
-    7.4e-4 at 1.1 (β = 1, 10, z̄0 = 2, dr 0.014, time tolerance 1e-6; benchmarks/accuracy.py's
-    references). The domain truncation ≈ 4z̄/L̄² of the force (docs/model.md) is kept below rtol/8
-    for z̄ ≤ 1."""
-    scale = (rtol / DEFAULT_RTOL) ** 0.25
-    dr = min(0.05, max(0.002, 0.014 * scale))
-    growth = 1.0 + min(0.5, max(0.02, 0.15 * scale))
-    length = max(100.0, math.sqrt(100.0 / (3.0 * rtol)))
-    return dr, growth, length
-
-
-#: Late in a hold the neck at the contact edge thins as h̄_min ≈ NECK_CONSTANT/√(β t̄)
-#: (measured: h̄_min √(β t̄) = 0.12-0.28 for β ∈ [10, 10⁴], z̄0 ∈ [0.05, 0.9], t̄ ∈ [10, 10³];
-#: the larger value is taken, so a neck is thought resolvable rather than not).
-NECK_CONSTANT = 0.3
-
-
-def _final_contact_radius(drive, z0, dr) -> float | None:
-    """Edge of the Hertz contact the drive ends in (dimensionless): √(depth) for an indentation
-    depth ≥ 0; 0 (refine the axis) when the sphere stops short of the surface by less than
-    50 dr², where the pressure spot, ≈ √(2 z̄) wide, would span fewer than ~10 cells; None
-    otherwise (no contact, nothing thin to resolve)."""
-    if isinstance(drive, Travel):
-        samples = getattr(drive.history, "travel_samples", None)
-        final = drive.history.travel(np.asarray([1e300])) if samples is None else samples
-        depth = float(np.max(np.asarray(final))) - z0
-    elif isinstance(drive, Load):
-        final = float(np.asarray(drive.load(np.asarray([1e300])))[0])
-        depth = (3.0 * final / (2.0 * math.pi)) ** (2.0 / 3.0)
-    else:
-        return None
-    if depth >= 0:
-        return math.sqrt(depth)
-    return 0.0 if -depth < 50.0 * dr**2 else None
-
-
-def _neck_resolvable(beta, t_end, rim_dr) -> bool:
-    """Whether the neck a hold ends with (width ≈ h̄_min^{2/3}) is at least a quarter of the
-    refined cell ``rim_dr``. Below that the film inside the contact is thinner than the
-    O(dr²) error of w̄ there and only zigzags from node to node (seen at β = 10⁶ held to t̄ = 10⁶,
-    h̄_min ~ 10⁻⁷): refining then buys no accuracy, only 10× the steps, so it is not done."""
-    neck = (NECK_CONSTANT / math.sqrt(beta * t_end)) ** (2.0 / 3.0)
-    return neck >= 0.25 * rim_dr
-
-
-#: The trapped film's spatial error inside a contact: |Δh̄(0)|/h̄(0) ≈ DIMPLE_ERROR Δr̄_c²/h̄_min
-#: for an interior spacing Δr̄_c, with h̄_min ≈ NECK_CONSTANT/√(β t̄_end) (measured against the
-#: converged references of benchmarks/accuracy.py at z̄0 = 0.5: 1.0e-3 at β = 100, t̄ = 5 and
-#: 3.8 %, 1.6 %, 0.31 % at β = 10³, t̄ = 10³ with Δr̄_c = 0.014, 0.0093, 0.0047; the rule
-#: gives 8.5e-4 and 4.4 %, 2.0 %, 0.49 %).
-DIMPLE_ERROR = 0.068
-#: ... and the interior is refined until that is at most DIMPLE_TARGET × rtol (0.3 % at the
-#: default rtol, the size of the other errors of the defaults).
-DIMPLE_TARGET = 30.0
-
-
-def _interior_refinement(settings, beta, t_end) -> float:
-    """How much finer than Δr̄ the contact interior needs to be for the trapped film a run ends
-    with: 1 (not at all) for a run that ends before the film under the contact is thin
-    (the default t̄ ≤ 5 run), up to ``Settings.contact_refinement`` for long holds."""
-    dr = settings.mesh_parameters()[0]
-    h_min = NECK_CONSTANT / math.sqrt(beta * t_end)
-    needed = dr * math.sqrt(DIMPLE_ERROR / (DIMPLE_TARGET * settings.rtol * h_min))
-    return min(settings.contact_refinement, max(1.0, needed))
-
-
-#: The late neck's spatial error: |Δh̄_min|/h̄_min ≈ NECK_ERROR (Δr̄_rim/w)^NECK_ORDER for a rim
-#: spacing Δr̄_rim and a neck of width w ≈ h̄_min^{2/3} (measured against the converged
-#: references of benchmarks/accuracy.py: 1.8 % and 0.3 % at β = 10³, t̄ = 10³ with 2.2 and 4.5
-#: cells across the neck; 0.38 % at β = 10³, t̄ = 5 with 4.6 cells). Held to DIMPLE_TARGET × rtol
-#: like the trapped film: ~5 cells across the neck at the default rtol.
-NECK_ERROR = 0.12
-NECK_ORDER = 2.35
-
-
-def _rim_refinement(settings, beta, t_end) -> float:
-    """How much finer than Δr̄ the contact's edge needs to be for the neck a run ends with:
-    ~1 for the default t̄ ≤ 5 run (its neck, h̄_min ≈ 0.011 at β = 100, is 4 cells wide),
-    up to ``Settings.rim_refinement`` for long holds at large β."""
-    dr = settings.mesh_parameters()[0]
-    neck = (NECK_CONSTANT / math.sqrt(beta * t_end)) ** (2.0 / 3.0)
-    cells = (NECK_ERROR / (DIMPLE_TARGET * settings.rtol)) ** (1.0 / NECK_ORDER)
-    return min(settings.rim_refinement, max(1.0, dr * cells / neck))
-
-
-def _contact_refinement(settings, drive, z0, beta, t_end) -> float | None:
-    """The radius ``Settings.contact_radius="auto"`` refines around for one run, or None."""
-    if settings.contact_radius != "auto":
-        return None
-    dr = settings.mesh_parameters()[0]
-    rim = _final_contact_radius(drive, float(z0), dr)
-    # (outside the fine zone there is nothing to refine: the zone must be widened instead)
-    if rim is None or rim >= 0.95 * settings.r_fine:
-        return None
-    return rim if _neck_resolvable(float(beta), t_end, dr / settings.rim_refinement) else None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -190,8 +77,9 @@ class Settings:
         rim_refinement, contact_refinement: the refinement factors (14 and 3: at β = 10³,
             t̄ = 10³ they bring the late h̄_min to 0.3 % and h̄(0) to 0.5 %; 7 and 2 left
             1.8 % and 1.3 %, benchmarks/accuracy.py).
-            ``make_plan``/``sweep``/fits share one mesh across (β, z̄0) and refine only around
-            a number given here, so they can differ from ``relax`` in late thin films.
+
+    The mesh of a run is :func:`lubjax.mesh_for` (its docstring says which refinement
+    ``make_plan``, ``sweep`` and the fits, whose one mesh serves a whole batch, leave out).
     """
 
     rtol: float = DEFAULT_RTOL
@@ -212,15 +100,10 @@ class Settings:
     def __post_init__(self):
         for name in ("rtol", "atol", "r_fine", "initial_step", "force_floor", "rim_refinement",
                      "contact_refinement"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not (
-                isinstance(value, numbers.Real) and math.isfinite(value) and value > 0
-            ):
-                raise ValueError(f"Settings.{name} must be a finite number > 0, got {value!r}")
+            check_positive(f"Settings.{name}", getattr(self, name))
         if not 1e-10 <= self.rtol <= 0.1:
             raise ValueError(f"Settings.rtol must be in [1e-10, 0.1], got {self.rtol}")
-        if self.order not in (1, 2, 3):
-            raise ValueError(f"Settings.order must be 1, 2 or 3, got {self.order!r}")
+        check_choice("Settings.order", self.order, (1, 2, 3))
         if not (isinstance(self.max_steps, int) and self.max_steps >= 10):
             raise ValueError(f"Settings.max_steps must be an integer >= 10, got {self.max_steps!r}")
         for name in ("dr", "length", "mesh_growth"):
@@ -237,7 +120,7 @@ class Settings:
             )
 
     def mesh_parameters(self) -> tuple[float, float, float]:
-        dr, growth, length = _mesh_from_tolerance(self.rtol)
+        dr, growth, length = mesh_from_tolerance(self.rtol)
         return (
             self.dr if self.dr is not None else dr,
             self.mesh_growth if self.mesh_growth is not None else growth,
@@ -328,6 +211,9 @@ def make_plan(
 ) -> Plan:
     """Mesh and influence matrix (cached per mesh), tolerance, drive and output times.
 
+    The mesh is ``settings.mesh()``, one for every (β, z̄0) the plan serves: without the
+    per-run refinement of :func:`relax` (:func:`lubjax.mesh_for` says what that changes).
+
     ``history``: a prescribed travel (default ``RampHold()``); or ``drive``: any drive.
     ``substrate``: ``HalfSpace()`` (default), ``Layer``, ``Viscoelastic``.
     ``times``: where :func:`force_curve` reports F̄ (default 501 equally spaced times).
@@ -411,19 +297,6 @@ def _check_x64():
             "jax.config.update('jax_enable_x64', True) (importing lubjax does this) and do not "
             "turn it off afterwards."
         )
-
-
-def check_parameters(beta, z0):
-    """ValueError naming the parameter unless β and z̄0 lie in the solver's ranges."""
-    for name, v, (lo, hi) in [("beta", beta, BETA_RANGE), ("z0", z0, Z0_RANGE)]:
-        if isinstance(v, bool):
-            raise ValueError(f"{name} must be a number in [{lo:g}, {hi:g}], got {v!r}")
-        try:
-            f = float(v)
-        except (TypeError, ValueError):
-            raise ValueError(f"{name} must be a number in [{lo:g}, {hi:g}], got {v!r}") from None
-        if not (math.isfinite(f) and lo <= f <= hi):
-            raise ValueError(f"{name} must be finite and in [{lo:g}, {hi:g}], got {v!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -527,13 +400,6 @@ _SERIES = ("t", "force", "film_min", "film_center", "outflow", "gap", "velocity"
            "elastic_energy", "dissipation")
 
 
-def _relax_mesh(settings, drive, z0, beta, t_end) -> Mesh:
-    """The mesh :func:`relax` runs on: the tolerance's, refined for the contact the run ends in."""
-    return settings.mesh(_contact_refinement(settings, drive, z0, beta, t_end),
-                         _interior_refinement(settings, float(beta), t_end),
-                         _rim_refinement(settings, float(beta), t_end))
-
-
 def _forward_rollout(d, b, z, h, s, te, pt, t):
     return rollout(d, b, z, h, te, t, pt, substrate=s, mode="forward")
 
@@ -558,17 +424,11 @@ def _compiled_rollouts(runs, history, substrate) -> tuple[list, float]:
         leaves, treedef = jax.tree_util.tree_flatten((history, substrate, tol))
         return disc.r.shape[0], treedef, tuple(np.shape(x) for x in leaves), ptimes.size
 
-    start = time.perf_counter()
-    keys = [key_of(*r) for r in runs]
-    new = {k: r for k, r in zip(keys, runs) if k not in _COMPILED}
-    if new:
-        def lowerer(d, tol, pt):
-            return lambda: _lower_rollout(d, history, substrate, tol, pt.size)
+    def lowerer(d, tol, pt):
+        return lambda: _lower_rollout(d, history, substrate, tol, pt.size)
 
-        compiled = _compiler.compile_all(lowerer(*r) for r in new.values())
-        _COMPILED.update(zip(new, compiled))
-    seconds = time.perf_counter() - start if new else 0.0
-    return [_COMPILED[k] for k in keys], seconds
+    return _compiler.cached_all(_COMPILED, [key_of(*r) for r in runs],
+                                [lowerer(*r) for r in runs])
 
 
 def relax(
@@ -607,14 +467,13 @@ def relax(
     """
     _check_x64()
     check_parameters(beta, z0)
-    if check not in ("raise", "warn", "flag"):
-        raise ValueError(f"check must be 'raise', 'warn' or 'flag', got {check!r}")
+    check_choice("check", check, ("raise", "warn", "flag"))
     history = _drive_of(history, drive)
     settings = Settings() if settings is None else settings
     t_start = float(history.t_start)
     t_end = _check_t_end(t_end, t_start)
     ptimes = _check_times(profile_times, "profile_times", t_start, t_end)
-    mesh = _relax_mesh(settings, history, z0, beta, t_end)
+    mesh = mesh_for(settings, drive=history, beta=beta, z0=z0, t_end=t_end)
     substrate = as_substrate(substrate)
     disc = discretise(mesh, substrate)
     tol = settings.tolerance()

@@ -37,8 +37,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._checks import check_layer_base, check_poisson, check_positive, is_traced
 from ._influence import influence_matrix
 from ._mesh import Mesh
+from ._pytree import register
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,7 +69,8 @@ class Layer:
         thickness: H̄ > 0 (``lubjax.layer_thickness_bar(H, R, d_c)`` from SI).
         poisson: ν ∈ (-1, 0.5] (0.5: incompressible, PDMS and gels); E* = E/(1 - ν²) as for the
             half-space, so H̄ → ∞ is the half-space.
-        interface: "bonded" (no slip at the base) or "frictionless".
+        interface: how it rests on the base (``LAYER_BASES``): "bonded" (no slip) or
+            "frictionless".
     """
 
     thickness: float
@@ -75,18 +78,11 @@ class Layer:
     interface: str = "bonded"
 
     def __post_init__(self):
-        h = self.thickness
-        if isinstance(h, bool) or not (isinstance(h, (int, float)) and math.isfinite(h) and h > 0):
-            raise ValueError(f"Layer.thickness must be a finite number > 0, got {h!r}")
-        nu = self.poisson
-        if not (isinstance(nu, (int, float)) and -1.0 < nu <= 0.5):
-            raise ValueError(f"Layer.poisson must be in (-1, 0.5], got {nu!r}")
-        if self.interface not in ("bonded", "frictionless"):
-            raise ValueError(
-                f"Layer.interface must be 'bonded' or 'frictionless', got {self.interface!r}"
-            )
-        object.__setattr__(self, "thickness", float(h))
-        object.__setattr__(self, "poisson", float(nu))
+        thickness = check_positive("Layer.thickness", self.thickness)
+        poisson = check_poisson("Layer.poisson", self.poisson)
+        check_layer_base("Layer.interface", self.interface)
+        object.__setattr__(self, "thickness", thickness)
+        object.__setattr__(self, "poisson", poisson)
 
     def influence(self, mesh: Mesh) -> np.ndarray:
         from ._layer import layer_influence_matrix
@@ -152,7 +148,7 @@ class Viscoelastic:
     elastic: HalfSpace | Layer = HalfSpace()
 
     def __post_init__(self):
-        if isinstance(self.retardation, jax.core.Tracer) or isinstance(self.times, jax.core.Tracer):
+        if is_traced(self.retardation) or is_traced(self.times):
             return
         j = np.atleast_1d(np.asarray(self.retardation, np.float64))
         lam = np.atleast_1d(np.asarray(self.times, np.float64))
@@ -174,17 +170,17 @@ class Viscoelastic:
         """One term: E(t) = E∞ + (E₀ - E∞) e^{-t/τ}, ``stiffening`` = E₀/E∞ > 1, τ =
         ``relaxation_time`` (t_c units). Its compliance creeps with λ = τ E₀/E∞ from 1/E₀ to
         1/E∞: J₁ = 1 - E∞/E₀. Differentiable in both (closed form)."""
-        m = jnp.asarray(stiffening, jnp.float64) if _traced(stiffening) else float(stiffening)
-        tau = jnp.asarray(relaxation_time, jnp.float64) if _traced(relaxation_time) else float(
+        m = jnp.asarray(stiffening, jnp.float64) if is_traced(stiffening) else float(stiffening)
+        tau = jnp.asarray(relaxation_time, jnp.float64) if is_traced(relaxation_time) else float(
             relaxation_time
         )
-        if not _traced(m) and not (m > 1 and math.isfinite(m)):
+        if not is_traced(m) and not (m > 1 and math.isfinite(m)):
             raise ValueError(f"stiffening E0/Einf must be > 1, got {stiffening!r}")
-        if not _traced(tau) and not (tau > 0 and math.isfinite(tau)):
+        if not is_traced(tau) and not (tau > 0 and math.isfinite(tau)):
             raise ValueError(f"relaxation_time must be > 0, got {relaxation_time!r}")
         ret = jnp.reshape(1.0 - 1.0 / m, (1,))
         lam = jnp.reshape(tau * m, (1,))
-        if not _traced(m) and not _traced(tau):
+        if not is_traced(m) and not is_traced(tau):
             ret, lam = np.asarray(ret), np.asarray(lam)
         return cls(ret, lam, HalfSpace() if elastic is None else elastic)
 
@@ -266,10 +262,6 @@ class Viscoelastic:
         return j0 + jnp.sum(jk * (1 - jnp.exp(-t / lam)), axis=-1)
 
 
-def _traced(x):
-    return isinstance(x, jax.core.Tracer)
-
-
 def as_substrate(substrate):
     if substrate is None:
         return HalfSpace()
@@ -281,20 +273,6 @@ def as_substrate(substrate):
     )
 
 
-jax.tree_util.register_static(HalfSpace)
-jax.tree_util.register_static(Layer)
-
-
-def _flatten_visco(v):
-    return (v.retardation, v.times), v.elastic
-
-
-def _unflatten_visco(elastic, children):
-    obj = object.__new__(Viscoelastic)
-    object.__setattr__(obj, "retardation", children[0])
-    object.__setattr__(obj, "times", children[1])
-    object.__setattr__(obj, "elastic", elastic)
-    return obj
-
-
-jax.tree_util.register_pytree_node(Viscoelastic, _flatten_visco, _unflatten_visco)
+register(HalfSpace)
+register(Layer, static=("thickness", "poisson", "interface"))
+register(Viscoelastic, ("retardation", "times"), static=("elastic",))

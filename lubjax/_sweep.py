@@ -24,10 +24,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _compiler, _sharding
+from ._checks import check_parameter_arrays
 from ._controller import DONE
 from ._indenter import RampHold, SampledTravel
 from ._rollout import evaluate, rollout
-from ._solve import BETA_RANGE, Z0_RANGE, Settings, _check_x64, make_plan
+from ._solve import Settings, _check_x64, make_plan
 from ._threads import single_threaded_blas
 
 
@@ -85,12 +86,12 @@ def _compiled_for(tol, args, mesh, mode):
     shapes = tuple(np.shape(x) for x in leaves)
     n_dev = 1 if mesh is None else mesh.size
     key = (n_dev, disc.r.shape[0], treedef, shapes, times.shape[0], tol, b.shape[0], mode)
-    if key in _COMPILED:
-        return _COMPILED[key], 0.0
-    fn = jax.jit(_sharding.over_batch(_batched(tol, mode), mesh, _BATCHED))
-    start = time.perf_counter()
-    _COMPILED[key] = _compiler.compile_one(fn.lower(*args))
-    return _COMPILED[key], time.perf_counter() - start
+
+    def build():
+        fn = jax.jit(_sharding.over_batch(_batched(tol, mode), mesh, _BATCHED))
+        return _compiler.compile_one(fn.lower(*args))
+
+    return _compiler.cached(_COMPILED, key, build)
 
 
 def sweep(
@@ -126,12 +127,7 @@ def sweep(
     b, z = b.ravel(), z.ravel()
     if b.size == 0:
         raise ValueError("sweep needs at least one (beta, z0) pair")
-    for name, v, (lo, hi) in (("beta", b, BETA_RANGE), ("z0", z, Z0_RANGE)):
-        good = np.isfinite(v) & (v >= lo) & (v <= hi)
-        if not np.all(good):
-            raise ValueError(
-                f"{name} values must be finite and in [{lo:g}, {hi:g}], got {v[~good][:3]}"
-            )
+    check_parameter_arrays(b, z)
     mode = _sharding.batching_mode(batching)
     n_dev = _sharding.device_count(devices)
     plan = make_plan(

@@ -5,34 +5,43 @@ from __future__ import annotations
 import dataclasses
 import math
 
-
-def _check_positive(name: str, value, unit: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number in {unit}, got {value!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise ValueError(f"{name} must be finite and > 0 ({unit}), got {value!r}")
-    return v
-
-
-def _check_poisson(name: str, value) -> float:
-    v = float(value)
-    if not (math.isfinite(v) and -1.0 < v <= 0.5):
-        raise ValueError(f"{name} must be in (-1, 0.5], got {value!r}")
-    return v
+from ._checks import check_poisson, check_quantity
 
 
 def _check_fields(obj, fields) -> None:
     """Validate and store each (name, unit) field of a frozen dataclass as a positive float."""
     for name, unit in fields:
-        object.__setattr__(obj, name, _check_positive(name, getattr(obj, name), unit))
+        object.__setattr__(obj, name, check_quantity(name, getattr(obj, name), unit))
+
+
+def si_scales(E_star, radius, d_c, *, t_c=None, speed=None, viscosity=None) -> dict:
+    """The scales of eqs 7, 8e and 11b for a scene of modulus E* [Pa] and radius R [m] at the
+    depth scale d_c [m] and the time scale t_c [s] (or the speed d_c/t_c [m/s]): ``time_s``
+    (t = t_c t̄), ``length_m`` (r = √(R d_c) r̄), ``gap_m`` (d_c: h, z, w), ``pressure_Pa``
+    ((2E*/π) √(d_c/R)), ``force_N`` (F_s = 2E* d_c^{3/2} √R/π), and with a ``viscosity`` η
+    [Pa s] ``beta`` = E* d_c^{5/2}/(6π η v R^{3/2}) with v = d_c/t_c (written with the one
+    that was given, so either form rounds as written)."""
+    if (t_c is None) == (speed is None):
+        raise ValueError("si_scales needs exactly one of t_c and speed")
+    out = {
+        "time_s": d_c / speed if t_c is None else t_c,
+        "length_m": math.sqrt(radius * d_c),
+        "gap_m": d_c,
+        "pressure_Pa": 2 * E_star / math.pi * math.sqrt(d_c / radius),
+        "force_N": 2 * E_star * d_c**1.5 * math.sqrt(radius) / math.pi,
+    }
+    if viscosity is not None:
+        if speed is not None:
+            out["beta"] = E_star * d_c**2.5 / (6 * math.pi * viscosity * speed * radius**1.5)
+        else:
+            out["beta"] = E_star * d_c**1.5 * t_c / (6 * math.pi * viscosity * radius**1.5)
+    return out
 
 
 def plane_strain_modulus(E: float, poisson_ratio: float) -> float:
     """E* = E/(1 - ν²)."""
-    E = _check_positive("E", E, "Pa")
-    nu = _check_poisson("poisson_ratio", poisson_ratio)
+    E = check_quantity("E", E, "Pa")
+    nu = check_poisson("poisson_ratio", poisson_ratio)
     return E / (1.0 - nu**2)
 
 
@@ -41,25 +50,57 @@ def contact_modulus(E1: float, nu1: float, E2: float = math.inf, nu2: float = 0.
 
     Leave ``E2`` at infinity for a rigid indenter.
     """
-    E1 = _check_positive("E1", E1, "Pa")
-    nu1 = _check_poisson("nu1", nu1)
-    nu2 = _check_poisson("nu2", nu2)
+    E1 = check_quantity("E1", E1, "Pa")
+    nu1 = check_poisson("nu1", nu1)
+    nu2 = check_poisson("nu2", nu2)
     inv = (1 - nu1**2) / E1
     if not math.isinf(E2):
-        inv += (1 - nu2**2) / _check_positive("E2", E2, "Pa")
+        inv += (1 - nu2**2) / check_quantity("E2", E2, "Pa")
     return 1.0 / inv
 
 
 def reduced_radius(R1: float, R2: float = math.inf) -> float:
     """1/R = 1/R1 + 1/R2 (eq 24); R2 = inf for a sphere on a flat."""
-    R1 = _check_positive("R1", R1, "m")
+    R1 = check_quantity("R1", R1, "m")
     if math.isinf(R2):
         return R1
-    return 1.0 / (1.0 / R1 + 1.0 / _check_positive("R2", R2, "m"))
+    return 1.0 / (1.0 / R1 + 1.0 / check_quantity("R2", R2, "m"))
+
+
+class _Scene:
+    """What every SI scene derives from :func:`si_scales` (its own ``_si_scales()``)."""
+
+    def _si_scales(self) -> dict:
+        raise NotImplementedError
+
+    @property
+    def scales(self) -> dict:
+        """The scales the scene reports (time, length, gap, pressure, force), β apart."""
+        return {k: v for k, v in self._si_scales().items() if k != "beta"}
+
+    @property
+    def beta(self) -> float:
+        """β = E* d_c^{5/2} / (6π η v R^{3/2}) with v = d_c/t_c, eq 8e."""
+        return self._si_scales()["beta"]
+
+    @property
+    def length_scale(self) -> float:
+        """√(R d_c) [m]: r = √(R d_c) r̄ (h, z, w scale with d_c)."""
+        return self.scales["length_m"]
+
+    @property
+    def pressure_scale(self) -> float:
+        """p = (2E*/π) √(d_c/R) p̄ [Pa], eq 7f."""
+        return self.scales["pressure_Pa"]
+
+    @property
+    def force_scale(self) -> float:
+        """F = (2 E* d_c^{3/2} √R / π) F̄ [N], eq 11b."""
+        return self.scales["force_N"]
 
 
 @dataclasses.dataclass(frozen=True)
-class RelaxationTest:
+class RelaxationTest(_Scene):
     """A relaxation test in SI units (eq 5): gap z0, pushed at speed v0 by d_c, then held.
 
     Attributes:
@@ -95,14 +136,9 @@ class RelaxationTest:
     def from_E(cls, E: float, poisson_ratio: float, **kw) -> RelaxationTest:
         return cls(E_star=plane_strain_modulus(E, poisson_ratio), **kw)
 
-    @property
-    def beta(self) -> float:
-        """β = E* d_c^{5/2} / (6π η v0 R^{3/2}), eq 8e."""
-        return (
-            self.E_star
-            * self.indent**2.5
-            / (6 * math.pi * self.viscosity * self.speed * self.radius**1.5)
-        )
+    def _si_scales(self) -> dict:
+        return si_scales(self.E_star, self.radius, self.indent, speed=self.speed,
+                         viscosity=self.viscosity)
 
     @property
     def z0_bar(self) -> float:
@@ -112,32 +148,7 @@ class RelaxationTest:
     @property
     def time_scale(self) -> float:
         """t_c = d_c/v0 [s]: t = t_c t̄."""
-        return self.indent / self.speed
-
-    @property
-    def length_scale(self) -> float:
-        """√(R d_c) [m]: r = √(R d_c) r̄ (h, z, w scale with d_c)."""
-        return math.sqrt(self.radius * self.indent)
-
-    @property
-    def pressure_scale(self) -> float:
-        """p = (2E*/π) √(d_c/R) p̄ [Pa], eq 7f."""
-        return 2 * self.E_star / math.pi * math.sqrt(self.indent / self.radius)
-
-    @property
-    def force_scale(self) -> float:
-        """F = (2 E* d_c^{3/2} √R / π) F̄ [N], eq 11b."""
-        return 2 * self.E_star * self.indent**1.5 * math.sqrt(self.radius) / math.pi
-
-
-def _scales_of(E_star: float, radius: float, d_c: float, t_c: float) -> dict:
-    return {
-        "time_s": t_c,
-        "length_m": math.sqrt(radius * d_c),
-        "gap_m": d_c,
-        "pressure_Pa": 2 * E_star / math.pi * math.sqrt(d_c / radius),
-        "force_N": 2 * E_star * d_c**1.5 * math.sqrt(radius) / math.pi,
-    }
+        return self._si_scales()["time_s"]
 
 
 def hertz_indentation(E_star: float, radius: float, load: float) -> float:
@@ -146,7 +157,7 @@ def hertz_indentation(E_star: float, radius: float, load: float) -> float:
 
 
 @dataclasses.dataclass(frozen=True)
-class CreepTest:
+class CreepTest(_Scene):
     """A creep test in SI units: a load ramped from 0 to ``load`` in ``ramp_time``, then held,
     on a sphere that starts at rest at the gap ``gap``.
 
@@ -186,16 +197,6 @@ class CreepTest:
         return self.ramp_time
 
     @property
-    def beta(self) -> float:
-        d = self.indent
-        return (
-            self.E_star
-            * d**1.5
-            * self.ramp_time
-            / (6 * math.pi * self.viscosity * self.radius**1.5)
-        )
-
-    @property
     def z0_bar(self) -> float:
         return self.gap / self.indent
 
@@ -204,13 +205,9 @@ class CreepTest:
         """F̄ of the plateau (2π/3 by the choice of d_c)."""
         return self.load / self.force_scale
 
-    @property
-    def force_scale(self) -> float:
-        return self.scales["force_N"]
-
-    @property
-    def scales(self) -> dict:
-        return _scales_of(self.E_star, self.radius, self.indent, self.time_scale)
+    def _si_scales(self) -> dict:
+        return si_scales(self.E_star, self.radius, self.indent, t_c=self.time_scale,
+                         viscosity=self.viscosity)
 
     def drive(self, history=None):
         """The :class:`lubjax.Load` drive: the ramp-and-hold, or ``history`` (a sampled load
@@ -222,7 +219,7 @@ class CreepTest:
 
 
 @dataclasses.dataclass(frozen=True)
-class Collision:
+class Collision(_Scene):
     """A free sphere approaching a wall through the film (Davis, Serayssol & Hinch 1986):
     mass ``mass``, speed ``speed`` toward the wall at the gap ``gap``, optionally pushed by a
     constant ``weight`` (its weight less buoyancy, N).
@@ -260,15 +257,7 @@ class Collision:
 
     @property
     def time_scale(self) -> float:
-        return self.gap / self.speed
-
-    @property
-    def beta(self) -> float:
-        return (
-            self.E_star
-            * self.gap**2.5
-            / (6 * math.pi * self.viscosity * self.speed * self.radius**1.5)
-        )
+        return self._si_scales()["time_s"]
 
     @property
     def stokes(self) -> float:
@@ -279,13 +268,9 @@ class Collision:
         """Davis et al.'s ε = 2/(3π²β)."""
         return 2 / (3 * math.pi**2 * self.beta)
 
-    @property
-    def force_scale(self) -> float:
-        return self.scales["force_N"]
-
-    @property
-    def scales(self) -> dict:
-        return _scales_of(self.E_star, self.radius, self.gap, self.time_scale)
+    def _si_scales(self) -> dict:
+        return si_scales(self.E_star, self.radius, self.gap, speed=self.speed,
+                         viscosity=self.viscosity)
 
     def drive(self):
         from ._drives import FreeSphere

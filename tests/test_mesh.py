@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import lubjax
-from lubjax._solve import _contact_refinement, _interior_refinement, _rim_refinement
+from lubjax._mesh import _contact_refinement, _interior_refinement, _rim_refinement
 
 RAMP = lubjax.as_drive(lubjax.RampHold())
 

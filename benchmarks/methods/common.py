@@ -1,7 +1,7 @@
 """Shared pieces of the benchmark methods: thread pinning, output grids, result bookkeeping and
 the conservative finite-volume (FV) operators that the iterative/explicit/MOL methods share with
-lubjax (same mesh arrays from ``lubjax.discretise``, same harmonic-Simpson face mobility), so
-that those methods differ from lubjax only in how they step in time.
+lubjax (same mesh arrays from ``lubjax.stepper.discretise``, same harmonic-Simpson face
+mobility), so that those methods differ from lubjax only in how they step in time.
 
 Every method module exposes ``run(beta, z0, t_out, **opts) -> (F_at_t_out, info)`` where
 ``info`` holds at least: wall_s (run time after compilation/setup), compile_s (jit compile and
@@ -112,7 +112,7 @@ def fv_mesh(kind: str = "graded", dr: float = 0.02, length: float = 100.0, r_fin
             growth: float = 1.04):
     mesh = lubjax.graded_mesh(dr, r_fine, length, growth) if kind == "graded" \
         else lubjax.uniform_mesh(dr, length)
-    return lubjax.discretise(mesh)
+    return lubjax.stepper.discretise(mesh)
 
 
 def film(disc, z, p):

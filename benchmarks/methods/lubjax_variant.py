@@ -29,7 +29,8 @@ _COMPILED: dict = {}
 def _compiled(disc, tol, history):
     key = (disc.r.shape[0], tol)
     if key not in _COMPILED:
-        fn = jax.jit(lambda d, b, z, h, te: lubjax.rollout(d, b, z, h, te, tol, mode="forward"))
+        fn = jax.jit(lambda d, b, z, h, te: lubjax.stepper.rollout(d, b, z, h, te, tol,
+                                                                     mode="forward"))
         start = time.perf_counter()
         _COMPILED[key] = fn.lower(disc, 1.0, 1.0, history, 1.0).compile()
         return _COMPILED[key], time.perf_counter() - start
@@ -44,8 +45,8 @@ def build(*, rtol=3e-4, atol=1e-14, mesh="graded", dr=None, length=None, r_fine=
         m = settings.mesh()
     else:
         m = lubjax.uniform_mesh(0.02 if dr is None else dr, 4.0 if length is None else length)
-    tol = lubjax.Tolerance(rtol, atol, initial_step, order, max_steps)
-    return lubjax.discretise(m), tol
+    tol = lubjax.stepper.Tolerance(rtol, atol, initial_step, order, max_steps)
+    return lubjax.stepper.discretise(m), tol
 
 
 def run(beta, z0, t_out, **opts):
@@ -61,7 +62,7 @@ def run(beta, z0, t_out, **opts):
         wall = time.perf_counter() - start
     steps = traj.steps
     keep = np.asarray(steps.accepted)
-    force = np.asarray(lubjax.evaluate(steps, t_out, "force"))
+    force = np.asarray(lubjax.stepper.evaluate(steps, t_out, "force"))
     info = make_info(wall_s=wall, compile_s=compile_s + setup_s,
                      force=np.asarray(steps.force)[keep],
                      film_min=np.asarray(steps.film_min)[keep],

@@ -1,0 +1,129 @@
+"""Validation at the library's boundaries: numbers, ranges and choices, each with an error that
+names the parameter and what it may be.
+
+Every check lets a JAX tracer through (:func:`is_traced`): a value is checked where it is built
+from concrete numbers, and the pytrees that carry it are unflattened under ``jit``/``vmap``
+with tracers (or placeholders) that cannot be checked and need not be.
+
+The solver's ranges live here too: β and z̄0 (:data:`BETA_RANGE`, :data:`Z0_RANGE`), t̄_end
+(:data:`T_END_MAX`), Poisson's ratio (:data:`POISSON_RANGE`) and the bases a layer may rest on
+(:data:`LAYER_BASES`).
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import jax
+import numpy as np
+
+#: Parameter ranges the solver accepts. Inside them the stepper was mapped (README, stability
+#: map: β ∈ [0.1, 10⁶] × z̄0 ∈ [0.05, 5] to t̄ = 10⁶); outside, the thin-film scales overflow
+#: float64 long before any physics changes.
+BETA_RANGE = (1e-4, 1e9)
+Z0_RANGE = (1e-4, 1e3)
+T_END_MAX = 1e9
+#: Poisson's ratio ν ∈ (-1, 0.5] (0.5: incompressible): open below, closed above.
+POISSON_RANGE = (-1.0, 0.5)
+#: How a layer rests on its rigid base: no slip, or free to slide.
+LAYER_BASES = ("bonded", "frictionless")
+
+
+def is_traced(value) -> bool:
+    """Whether ``value`` is a JAX tracer (checked where it was built, not here)."""
+    return isinstance(value, jax.core.Tracer)
+
+
+def _is_real(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def check_number(name, value, lo=None, hi=None, lo_open=False):
+    """A concrete real scalar, finite, ≥ ``lo`` (> with ``lo_open``) and ≤ ``hi``; tracers
+    pass."""
+    if is_traced(value):
+        return
+    if isinstance(value, bool) or np.ndim(value) != 0:
+        raise ValueError(f"{name} must be a scalar number, got {value!r}")
+    v = float(value)
+    if not np.isfinite(v):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if lo is not None and (v <= lo if lo_open else v < lo):
+        raise ValueError(f"{name} must be {'>' if lo_open else '>='} {lo:g}, got {value!r}")
+    if hi is not None and v > hi:
+        raise ValueError(f"{name} must be <= {hi:g}, got {value!r}")
+
+
+def check_positive(name, value, unit: str | None = None) -> float:
+    """A finite real number > 0, as a float: "``name`` must be a finite number > 0 (unit)"."""
+    if not (_is_real(value) and math.isfinite(value) and value > 0):
+        where = f" ({unit})" if unit else ""
+        raise ValueError(f"{name} must be a finite number > 0{where}, got {value!r}")
+    return float(value)
+
+
+def check_quantity(name, value, unit: str) -> float:
+    """A physical quantity in SI (anything ``float`` reads), finite and > 0, as a float."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive number in {unit}, got {value!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise ValueError(f"{name} must be finite and > 0 ({unit}), got {value!r}")
+    return v
+
+
+def check_poisson(name, value) -> float:
+    """Poisson's ratio in :data:`POISSON_RANGE`, as a float."""
+    lo, hi = POISSON_RANGE
+    if not (_is_real(value) and lo < value <= hi):
+        raise ValueError(f"{name} must be in ({lo:g}, {hi:g}], got {value!r}")
+    return float(value)
+
+
+def _listed(choices) -> str:
+    words = [repr(c) for c in choices]
+    return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} or {words[-1]}"
+
+
+def check_choice(name, value, choices):
+    """``value`` one of ``choices``: "``name`` must be 'a', 'b' or 'c', got ..."."""
+    if value not in choices:
+        raise ValueError(f"{name} must be {_listed(choices)}, got {value!r}")
+    return value
+
+
+def check_layer_base(name, value) -> str:
+    """One of :data:`LAYER_BASES`."""
+    return check_choice(name, value, LAYER_BASES)
+
+
+def check_in_range(name, value, bounds):
+    """A real number (not a bool) in the closed interval ``bounds``."""
+    lo, hi = bounds
+    if isinstance(value, bool):
+        raise ValueError(f"{name} must be a number in [{lo:g}, {hi:g}], got {value!r}")
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number in [{lo:g}, {hi:g}], got {value!r}") from None
+    if not (math.isfinite(f) and lo <= f <= hi):
+        raise ValueError(f"{name} must be finite and in [{lo:g}, {hi:g}], got {value!r}")
+    return f
+
+
+def check_parameters(beta, z0):
+    """ValueError naming the parameter unless β and z̄0 lie in the solver's ranges."""
+    check_in_range("beta", beta, BETA_RANGE)
+    check_in_range("z0", z0, Z0_RANGE)
+
+
+def check_parameter_arrays(beta: np.ndarray, z0: np.ndarray):
+    """:func:`check_parameters` for every member of a batch (float arrays)."""
+    for name, v, (lo, hi) in (("beta", beta, BETA_RANGE), ("z0", z0, Z0_RANGE)):
+        good = np.isfinite(v) & (v >= lo) & (v <= hi)
+        if not np.all(good):
+            raise ValueError(
+                f"{name} values must be finite and in [{lo:g}, {hi:g}], got {v[~good][:3]}"
+            )

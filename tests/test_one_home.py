@@ -1,0 +1,165 @@
+"""Each fact in one place: the mesh rule (lubjax.mesh_for and the drives' final depth), the SI
+scales (lubjax.si_scales), validation (lubjax/_checks.py), pytree registration
+(lubjax/_pytree.py), the compiled-program cache (lubjax/_compiler.py) and the public surface
+(lubjax.__all__, lubjax.stepper, and what fitting may import)."""
+
+import math
+import pathlib
+import re
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import fitting
+import lubjax
+from lubjax import _checks, _compiler
+
+COARSE = dict(dr=0.05, mesh_growth=1.2, length=50.0, error_estimate=False)
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+
+def test_relax_runs_on_the_mesh_of_mesh_for():
+    settings = lubjax.Settings(**COARSE)
+    res = lubjax.relax(100.0, 0.5, 1.5, settings=settings)
+    mesh = lubjax.mesh_for(settings, drive=lubjax.Travel(), beta=100.0, z0=0.5, t_end=1.5)
+    np.testing.assert_array_equal(res.r, mesh.r)
+    # the run-dependent refinement is what tells it apart from the shared mesh of make_plan
+    assert mesh.size > settings.mesh().size
+    plan = lubjax.make_plan(1.5, settings=settings)
+    assert plan.mesh == settings.mesh()
+
+
+def test_mesh_for_without_contact_refinement_is_the_shared_mesh():
+    settings = lubjax.Settings(contact_radius=None)
+    for drive in (lubjax.Travel(), lubjax.Load(), lubjax.Spring(), lubjax.FreeSphere()):
+        assert lubjax.mesh_for(settings, drive=drive, beta=10.0, z0=0.5, t_end=5.0) == (
+            settings.mesh())
+
+
+def test_drives_tell_the_mesh_rule_how_deep_they_end():
+    assert lubjax.Travel().final_depth(0.25) == pytest.approx(0.75)
+    t = np.linspace(0.0, 2.0, 21)
+    sampled = lubjax.SampledTravel(t, np.minimum(t, 1.3))
+    assert lubjax.Travel(sampled).final_depth(0.5) == pytest.approx(0.8)
+    # Hertz: F̄ = (2π/3) δ̄^{3/2}, so the default load's plateau 2π/3 ends at depth 1
+    assert lubjax.Load().final_depth(3.0) == pytest.approx(1.0)
+    assert lubjax.Load(scale=2 * math.pi / 3 * 8).final_depth(0.1) == pytest.approx(4.0)
+    assert lubjax.Spring().final_depth(0.5) is None
+    assert lubjax.FreeSphere().final_depth(0.5) is None
+
+
+def test_a_spring_or_free_sphere_gets_no_contact_refinement():
+    settings = lubjax.Settings()
+    for drive in (lubjax.Spring(), lubjax.FreeSphere()):
+        mesh = lubjax.mesh_for(settings, drive=drive, beta=1e3, z0=0.5, t_end=1e3)
+        dr = settings.mesh_parameters()[0]
+        assert np.min(np.diff(mesh.r)) == pytest.approx(dr, rel=0.05)
+
+
+def test_mesh_for_checks_its_arguments():
+    settings = lubjax.Settings()
+    with pytest.raises(TypeError, match="as_drive"):
+        lubjax.mesh_for(settings, drive=lubjax.RampHold(), beta=10.0, z0=0.5, t_end=5.0)
+    with pytest.raises(ValueError, match="beta must be finite and in"):
+        lubjax.mesh_for(settings, drive=lubjax.Travel(), beta=1e12, z0=0.5, t_end=5.0)
+    with pytest.raises(ValueError, match="t_end must be > 0"):
+        lubjax.mesh_for(settings, drive=lubjax.Travel(), beta=10.0, z0=0.5, t_end=0.0)
+
+
+def test_si_scales_is_what_every_si_class_and_the_fit_use():
+    test = lubjax.RelaxationTest(E_star=3.9e6, radius=2e-3, viscosity=90.0, speed=2e-6,
+                                 indent=1.2e-5, gap=6e-6)
+    sc = lubjax.si_scales(test.E_star, test.radius, test.indent, speed=test.speed,
+                          viscosity=test.viscosity)
+    assert (test.beta, test.time_scale, test.force_scale, test.pressure_scale,
+            test.length_scale) == (sc["beta"], sc["time_s"], sc["force_N"], sc["pressure_Pa"],
+                                   sc["length_m"])
+    # F_s = 2E* d_c^{3/2} √R/π and β = E* d_c^{5/2}/(6π η v R^{3/2}) (eqs 11b, 8e)
+    assert sc["force_N"] == pytest.approx(2 * 3.9e6 * 1.2e-5**1.5 * math.sqrt(2e-3) / math.pi)
+    assert sc["beta"] == pytest.approx(3.9e6 * 1.2e-5**2.5 / (6 * math.pi * 90 * 2e-6
+                                                             * 2e-3**1.5))
+    # the time form of β is the speed form with v = d_c/t_c
+    by_time = lubjax.si_scales(test.E_star, test.radius, test.indent, t_c=test.time_scale,
+                               viscosity=test.viscosity)
+    assert by_time["beta"] == pytest.approx(sc["beta"], rel=1e-14)
+    scales = fitting._model.Scales(test.indent, test.speed, test.radius, 0.0, test.time_scale,
+                                   1.0, 1.0, test.indent)
+    assert scales.beta(test.E_star, test.viscosity) == test.beta
+    assert scales.force_scale(test.E_star) == test.force_scale
+    creep = lubjax.CreepTest(E_star=1e6, radius=1e-3, viscosity=1.0, load=1e-3, ramp_time=0.5,
+                             gap=1e-5)
+    assert "beta" not in creep.scales
+    assert creep.beta == pytest.approx(
+        1e6 * creep.indent**1.5 * 0.5 / (6 * math.pi * 1.0 * 1e-3**1.5), rel=1e-15)
+    with pytest.raises(ValueError, match="exactly one of t_c and speed"):
+        lubjax.si_scales(1.0, 1.0, 1.0)
+
+
+def test_checks_let_tracers_through_and_name_what_is_allowed():
+    @jax.jit
+    def scaled(k):
+        return lubjax.Spring(k).stiffness * 2.0
+
+    assert scaled(3.0) == 6.0  # the check skips the tracer of k
+    with pytest.raises(ValueError, match="Spring.stiffness must be > 0"):
+        lubjax.Spring(-1.0)
+    with pytest.raises(ValueError, match="'bonded' or 'frictionless', got 'glued'"):
+        lubjax.Layer(1.0, 0.5, "glued")
+    with pytest.raises(ValueError, match=r"Settings.order must be 1, 2 or 3, got 4"):
+        lubjax.Settings(order=4)
+    with pytest.raises(ValueError, match=r"nu must be in \(-1, 0.5\], got True"):
+        _checks.check_poisson("nu", True)
+    assert lubjax.LAYER_BASES == ("bonded", "frictionless")
+    with pytest.raises(ValueError, match=r"z0 values must be finite"):
+        lubjax.sweep([1.0, 2.0], [0.5, np.nan])
+
+
+def test_value_classes_unflatten_without_their_checks():
+    """Placeholders (here None, as vmap's in_axes trees hold) pass through tree_map."""
+    for obj in (lubjax.Travel(), lubjax.Load(), lubjax.Spring(2.0), lubjax.FreeSphere(),
+                lubjax.Viscoelastic.standard_linear_solid(2.0, 1.0),
+                lubjax.Travel(lubjax.SampledTravel(np.linspace(0, 1, 5), np.linspace(0, 1, 5)))):
+        marked = jax.tree_util.tree_map(lambda _: None, obj)
+        assert type(marked) is type(obj)
+    assert jax.tree_util.tree_leaves(lubjax.Layer(2.0)) == []
+    spring = jax.tree_util.tree_map(jnp.asarray, lubjax.Spring(2.0))
+    assert float(spring.stiffness) == 2.0
+
+
+def test_the_program_cache_builds_once():
+    programs, built = {}, []
+
+    def build():
+        built.append(1)
+        return "program"
+
+    first = _compiler.cached(programs, ("key",), build)
+    again = _compiler.cached(programs, ("key",), build)
+    assert first[0] == again[0] == "program" and again[1] == 0.0 and built == [1]
+    lowered = [lambda: jax.jit(lambda x: x + 1.0).lower(1.0)] * 2
+    fns, seconds = _compiler.cached_all(programs, ["a", "a"], lowered)
+    assert fns[0] is fns[1] and seconds > 0
+    assert _compiler.cached_all(programs, ["a"], lowered[:1])[1] == 0.0
+
+
+def test_public_surface():
+    for name in lubjax.__all__:
+        assert hasattr(lubjax, name), name
+    for name in lubjax.stepper.__all__:
+        assert hasattr(lubjax.stepper, name), name
+        assert name not in lubjax.__all__, name
+    assert lubjax.stepper.__doc__
+
+
+def test_fitting_uses_lubjax_through_its_public_surface():
+    """fitting imports lubjax.*, lubjax.stepper.* and lubjax._fitting_api only; the command
+    line's shared pieces (lubjax._cli's examples, lubjax._files) are its one other door."""
+    allowed = {"_fitting_api", "_cli", "_files"}
+    used = set()
+    for path in (ROOT / "fitting").glob("*.py"):
+        text = path.read_text()
+        used |= set(re.findall(r"from lubjax\.(_\w+) import", text))
+        used |= set(re.findall(r"from lubjax import (_\w+)", text))
+    assert used and used <= allowed, used - allowed
