@@ -31,9 +31,9 @@ from fitting._io import TraceError, parse_trace, read_trace
 from fitting._model import ModelSpec, Scales
 from lubjax import _files
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DATA = os.path.join(ROOT, "data")
-SEED = os.path.join(DATA, "paper_dc140.csv")
+from helpers import ROOT
+from helpers import SEED_TRACE as SEED
+
 SI = ["--E-star", "3.92e6", "--viscosity", "100", "--radius", "2e-3", "--speed", "1e-4",
       "--indent", "140e-6", "--gap", "140e-6"]  # fmt: skip
 

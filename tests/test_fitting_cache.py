@@ -12,7 +12,7 @@ import numpy as np
 from fitting import _cache
 from fitting._cache import cache_dir, enable_compilation_cache
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from helpers import ROOT, data_path
 
 
 def _env():
@@ -53,7 +53,7 @@ def test_a_cli_fit_fills_the_cache_and_no_cache_does_not(tmp_path):
     compiled programs into LUBJAX_CACHE_DIR; --no-cache writes none. (The trace is cut at 4 s.)"""
     import fitting
 
-    tr = fitting.read_trace(os.path.join(ROOT, "data", "paper_dc154.csv"))
+    tr = fitting.read_trace(data_path("paper_dc154"))
     keep = tr.time < 4.0
     src = tmp_path / "short.csv"
     fitting.write_trace(src, tr._replace(time=tr.time[keep], displacement=tr.displacement[keep],
