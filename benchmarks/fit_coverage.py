@@ -1,6 +1,6 @@
 """Are the reported standard errors honest? z-scores over seeded noise draws.
 
-    python benchmarks/fit_coverage.py [--draws 60] [--rho 0 0.8] [--t-bar 3]
+    python -m benchmarks.fit_coverage [--draws 60] [--rho 0 0.8] [--t-bar 3]
 
 Each draw is a clean trace of the fine generator (data/clean/, rtol 1e-7, 544 nodes: not the
 fit's discretisation) plus Gaussian noise of marginal σ = 1 % of the peak force, white (ρ = 0)
@@ -15,14 +15,11 @@ t̄ ≤ ``--t-bar``. Writes benchmarks/out/fit_coverage.md.
 
 from __future__ import annotations
 
-import argparse
 import os
-import sys
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-
-import fitting  # noqa: E402
+import fitting
+from benchmarks import _harness
+from benchmarks._harness import ROOT
 
 TRUE = {"E_star": "true_E_star_Pa", "viscosity": "true_viscosity_Pa_s", "z0": "true_z0_m"}
 
@@ -50,12 +47,12 @@ def _markdown(rows):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = _harness.parser(__doc__)
     p.add_argument("--draws", type=int, default=60)
     p.add_argument("--rho", type=float, nargs="+", default=[0.0, 0.8])
     p.add_argument("--t-bar", type=float, default=3.0)
-    args = p.parse_args(argv)
-    from benchmarks.machine import describe
+    args = _harness.parse(p, argv)
+    from benchmarks._harness import describe
 
     clean = clean_trace(t_bar=args.t_bar)
     rows = []
@@ -65,7 +62,7 @@ def main(argv=None):
         rows.append((rho, out))
         print(rho, out, flush=True)
     text = (f"# Coverage of the reported errors ({describe()})\n\n"
-            f"`python benchmarks/fit_coverage.py --draws {args.draws} --rho "
+            f"`python -m benchmarks.fit_coverage --draws {args.draws} --rho "
             f"{' '.join(f'{r:g}' for r in args.rho)} --t-bar {args.t_bar:g}`\n\n"
             + _markdown(rows))
     os.makedirs(os.path.join(ROOT, "benchmarks", "out"), exist_ok=True)

@@ -137,7 +137,7 @@ def test_separate_and_joint_fits_of_the_paper_traces():
 
     Within 3.5 rather than 3 standard errors: the files are fixed noise draws, and the noise of
     paper_dc140.csv alone puts its z0 at -2.9 standard errors (its noise-free twin in
-    data/clean/ fits to -0.2: `python benchmarks/time_error.py --fits`), so at 3 this test
+    data/clean/ fits to -0.2: `python -m benchmarks.studies.time_error --fits`), so at 3 this test
     passed or failed on 0.1 σ of discretisation error, in whichever direction the stepper's
     details put it (-2.85 before the mobility's second stage, -3.15 after; -2.98 and -3.01 at
     rtol 1e-5). Nine z-scores of calibrated errors exceed 3 somewhere with probability 2.4 %,

@@ -1,6 +1,6 @@
 """BLAS threads under load: the default run with the library's single-threaded BLAS, and without.
 
-    python benchmarks/threads.py [--repeat 5] [--busy N]
+    python -m benchmarks.threads [--repeat 5] [--busy N]
 
 Issue "Error control", item 8: on a loaded machine the CPU LAPACK's threads oversubscribe the
 cores and the same run swung from 0.15 s to 33 s. ``lubjax/_threads.py`` limits BLAS to one
@@ -27,9 +27,7 @@ import subprocess
 import sys
 import time
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-OUT = os.path.join(ROOT, "benchmarks", "out")
+from benchmarks._harness import OUT, ROOT
 
 CHILD = r"""
 import json, sys
@@ -80,7 +78,7 @@ def main(argv=None):
     lines = [
         f"# BLAS threads under load ({machine})",
         "",
-        f"`python benchmarks/threads.py --repeat {args.repeat} --busy {args.busy}`: "
+        f"`python -m benchmarks.threads --repeat {args.repeat} --busy {args.busy}`: "
         "`relax(100, 0.5, t_end=5)` (estimate off), run time without compilation, "
         f"{args.repeat} runs per cell in a fresh process; loaded = {args.busy} spinning "
         "processes beside it. `limited`: the library (BLAS held to one thread around the "
