@@ -345,6 +345,7 @@ def test_relax_passes_the_viscoelastic_solid_to_the_solver(tmp_path, monkeypatch
     assert rec["prony_tau_s"] is None and rec["prony_tau_bar"] == [2.0]
 
 
+@pytest.mark.slow
 def test_relax_viscoelastic_peak_force_above_the_relaxed_half_space(tmp_path, capsys):
     """End to end: during the ramp (t_c = 1.4 s, τ = 0.7 s) the solid is stiffer than its relaxed
     modulus (up to E*0 = 2 E*∞), so the peak force exceeds the half-space's at E*∞ = --E-star,

@@ -34,6 +34,7 @@ def _assert_recovers(res, tr, z_max=3.0):
     assert z and all(abs(v) < z_max for v in z.values()), (tr.name, z)
 
 
+@pytest.mark.slow
 def test_gradient_matches_central_differences():
     """∂F/∂(E*, η, z0) in SI by jacfwd vs central differences, through the measured history.
 
@@ -65,9 +66,11 @@ def test_gradient_matches_central_differences():
 
 @pytest.mark.parametrize(
     "spec, stem, z0",
-    [(SPEC, "paper_dc126", 126e-6), (fitting.ModelSpec(viscoelastic=True), "paper_dc126", 126e-6),
-     (fitting.ModelSpec(drive="force"), "creep_30mN", 140e-6)],
-    ids=["elastic", "viscoelastic", "load"])
+    [pytest.param(SPEC, "paper_dc126", 126e-6, id="elastic"),
+     pytest.param(fitting.ModelSpec(viscoelastic=True), "paper_dc126", 126e-6, id="viscoelastic",
+                  marks=pytest.mark.slow),
+     pytest.param(fitting.ModelSpec(drive="force"), "creep_30mN", 140e-6, id="load",
+                  marks=pytest.mark.slow)])
 def test_residual_jacobian_is_forward_mode_and_consistent(spec, stem, z0):
     """The Jacobian by the chain rule through the stepper's inputs (2 tangents for a travel on
     an elastic solid, 3 under load control, 4 viscoelastic) against jax.jacfwd of the residuals
@@ -213,6 +216,7 @@ def test_model_comparison_asks_for_viscoelasticity_only_when_it_is_there():
     assert cmp_plain["delta_bic"] < 0 < cmp_visco["delta_bic"]
 
 
+@pytest.mark.slow
 def test_mapped_and_vmapped_batches_fit_alike_and_map_skips_finished_traces():
     """batching="map" (each trace in turn, finished ones skipped) and "vmap" (all at once) are
     two evaluations of one model: the fits agree to a small part of their errors. Not to the

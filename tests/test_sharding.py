@@ -107,6 +107,7 @@ def _run(code, n):
 
 
 @pytest.mark.parametrize("n", [2, 4])
+@pytest.mark.slow
 def test_sweep_shards_over_host_devices(n):
     """5 pairs on N devices (padded): the forces of the one-device sweep to 1e-12 (they come
     out bit-identical: each device runs the one-device program on its slice), and one
@@ -115,6 +116,7 @@ def test_sweep_shards_over_host_devices(n):
 
 
 @pytest.mark.parametrize("n", [2, 4])
+@pytest.mark.slow
 def test_batched_fit_shards_over_host_devices(n):
     """Three traces fitted in one batch on N devices: every model/Jacobian call returns arrays
     split over the N devices, and at the common starting values the model agrees with the

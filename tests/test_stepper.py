@@ -1,5 +1,6 @@
 """The error-controlled stepper: reverse-mode gradients, outputs at any time, budgets, corners."""
 
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -12,6 +13,7 @@ from helpers import ACCURACY_T_OUT, COARSE, SCENES, accuracy_reference
 
 
 @pytest.mark.parametrize("order", [2, 3])
+@pytest.mark.slow
 def test_grad_agrees_with_jacfwd(order):
     """jax.grad (checkpointed scan) of a scalar loss of the force curve equals forward mode."""
     plan = lubjax.make_plan(2.0, settings=lubjax.Settings(**COARSE, max_steps=2000, order=order),
@@ -36,6 +38,7 @@ def test_reverse_and_forward_modes_compute_the_same_run():
     np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
 
 
+@pytest.mark.slow
 def test_gradient_against_central_differences():
     """The derivative of the discrete solution on its own steps (step sizes are not
     differentiated) against central differences of the adaptive solution. The adaptive force
@@ -54,7 +57,7 @@ def test_gradient_against_central_differences():
         assert np.max(np.abs(J[:, k] - fd)) < 1e-4 * np.max(np.abs(fd)), k
 
 
-@pytest.mark.parametrize("order", [2, 3])
+@pytest.mark.parametrize("order", [2, pytest.param(3, marks=pytest.mark.slow)])
 def test_results_do_not_depend_on_requested_times(order):
     s = lubjax.Settings(**COARSE, order=order)
     a = lubjax.relax(100.0, 0.7, 3.0, settings=s)
@@ -82,6 +85,15 @@ def test_short_run_has_loading_accuracy():
     assert short.force[-1] == pytest.approx(long.at([1.0])[0], rel=1e-3)
 
 
+@functools.cache
+def _coarse_run(rtol, order):
+    """relax(30, 0.8, 3) on the coarse mesh: the time-error tests share these runs (the BDF3
+    reference at rtol 1e-10 and the run at 1e-6 serve both of them)."""
+    s = lubjax.Settings(rtol=rtol, order=order, **COARSE, max_steps=200_000)
+    return lubjax.relax(30.0, 0.8, 3.0, settings=s)
+
+
+@pytest.mark.slow
 def test_time_error_converges_at_the_observed_order_in_rtol():
     """Local error control of a method of order p: global error ∝ rtol^{p/(p+1)} (fitted
     slope): BDF2 2/3, backward Euler throughout 1/2, BDF3 3/4. The BDF3 reference is checked
@@ -89,8 +101,7 @@ def test_time_error_converges_at_the_observed_order_in_rtol():
     times = np.linspace(0.1, 3.0, 60)
 
     def force(rtol, order):
-        s = lubjax.Settings(rtol=rtol, order=order, **COARSE, max_steps=200_000)
-        return lubjax.relax(30.0, 0.8, 3.0, settings=s).at(times)
+        return _coarse_run(rtol, order).at(times)
 
     refs = {2: force(1e-9, 2), 1: force(1e-8, 1), 3: force(1e-10, 3)}
     assert np.max(np.abs(refs[3] - refs[2])) < 1e-6 * np.max(refs[2])
@@ -102,13 +113,12 @@ def test_time_error_converges_at_the_observed_order_in_rtol():
         assert abs(slope - expected) < 0.15, (order, slope, errs)
 
 
+@pytest.mark.slow
 def test_bdf3_output_between_steps_is_as_accurate_as_at_them():
     """BDF3 steps are read by a cubic through four levels (its own dense output): between the
     steps the force is as accurate as at them. Measured, rtol 1e-6: midpoints 1.005× the error
     at the levels; BDF2's quadratic read of the same steps gave 1.46×."""
-    settings = dict(COARSE, order=3, max_steps=200_000)
-    ref = lubjax.relax(30.0, 0.8, 3.0, settings=lubjax.Settings(rtol=1e-10, **settings))
-    run = lubjax.relax(30.0, 0.8, 3.0, settings=lubjax.Settings(rtol=1e-6, **settings))
+    ref, run = _coarse_run(1e-10, 3), _coarse_run(1e-6, 3)
     levels = run.t[run.t > 0.05]
     mid = 0.5 * (levels[1:] + levels[:-1])
     at_levels, between = (np.max(np.abs(run.at(t) - ref.at(t))) for t in (levels, mid))
@@ -116,6 +126,7 @@ def test_bdf3_output_between_steps_is_as_accurate_as_at_them():
 
 
 @pytest.mark.parametrize("scene", list(SCENES))
+@pytest.mark.slow
 def test_bdf3_takes_every_drive_and_substrate(scene):
     """Settings(order=3) through the one code path: against a converged BDF2 run (rtol 1e-9),
     within 3 rtol of the quantity's range at rtol 1e-5, in fewer steps than BDF2 at that rtol
