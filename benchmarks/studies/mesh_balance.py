@@ -1,7 +1,7 @@
 """Space against time at one tolerance: is the mesh that ``rtol`` gets balanced with the time
 steps it gets? Each run keeps the time tolerance ``rtol`` and takes the base mesh (Δr̄, growth,
-L̄; ``lubjax._solve._mesh_from_tolerance``) of another tolerance, ``rtol × coarsening`` (below
-1: a finer mesh), so the steps stay (nearly) the same and only the mesh changes.
+L̄; ``lubjax.Settings(rtol=...).mesh_parameters()``) of another tolerance, ``rtol ×
+coarsening`` (below 1: a finer mesh), so the steps stay (nearly) the same and only the mesh changes.
 
     python -m benchmarks.mesh_balance [--coarsening 0.1 0.3 1 3 10] [--rtols 1e-3 1e-4 1e-5]
                                       [--order 3]
@@ -29,7 +29,6 @@ import lubjax
 from benchmarks import machine
 from benchmarks import work_precision as wp
 from benchmarks._harness import OUT
-from lubjax._solve import _mesh_from_tolerance
 
 CASES = [(100.0, 0.5), (1e4, 0.5), (100.0, 2.0)]
 HORIZONS = (1.0, 5.0)
@@ -51,7 +50,7 @@ def main(argv=None):
         for beta, z0 in CASES:
             for rtol in args.rtols:
                 for coarsening in args.coarsening:
-                    dr, growth, length = _mesh_from_tolerance(rtol * coarsening)
+                    dr, growth, length = lubjax.Settings(rtol=rtol * coarsening).mesh_parameters()
                     settings = lubjax.Settings(rtol=rtol, dr=dr, mesh_growth=growth,
                                                length=length, error_estimate=False,
                                                order=args.order)

@@ -3,8 +3,8 @@
     python -m benchmarks.time_error [--cases 100,2,5 ...] [--fits]
 
 (1) For each case β, z̄0, t̄_end: F̄ on rtol 1e-3's mesh (fixed: dr, growth, L̄ of
-``_mesh_from_tolerance(1e-3)``) at rtol 1e-2, 1e-3, 1e-4 against rtol 1e-7 on that same mesh, so
-the difference is time error only: max |ΔF̄|/peak, where it is largest, and the steps.
+``Settings(rtol=1e-3).mesh_parameters()``) at rtol 1e-2, 1e-3, 1e-4 against rtol 1e-7 on that
+same mesh, so the difference is time error only: max |ΔF̄|/peak, where it is largest, and the steps.
 (2) ``--fits``: paper_dc140's fit (data/paper_dc140.csv) at the fits' default settings and at
 rtol 3e-5 and 1e-5: (fitted - true)/standard error of E*, η, z0, and its noise-free twin
 (data/clean/paper_dc140_clean.csv) at the default, to see whether a z-score comes from the fit's
@@ -27,9 +27,8 @@ TRUE = {"E_star": "true_E_star_Pa", "viscosity": "true_viscosity_Pa_s", "z0": "t
 
 def time_errors(beta, z0, t_end):
     import lubjax
-    from lubjax._solve import _mesh_from_tolerance
 
-    dr, growth, length = _mesh_from_tolerance(1e-3)
+    dr, growth, length = lubjax.Settings(rtol=1e-3).mesh_parameters()
     mesh = dict(dr=dr, mesh_growth=growth, length=length, error_estimate=False)
     t = np.linspace(0.0, t_end, 2001)
     ref = lubjax.relax(beta, z0, t_end, settings=lubjax.Settings(rtol=1e-7, max_steps=200_000,
