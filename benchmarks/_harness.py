@@ -11,7 +11,7 @@ writes under ``benchmarks/out/`` unless told ``--out``. ::
         ap.add_argument(...)                       # the benchmark's own options
         args = _harness.parse(ap, argv)            # pins the threads, prints the machine
         ...
-        _harness.write_report(args.out, lines)     # lines[0] may quote _harness.command(args)
+        _harness.write_report(args.out, lines)     # lines may quote _harness.command(argv)
 
 Threads: BLAS and XLA:CPU get ``--threads`` threads (default ``LUBJAX_BENCH_THREADS``, else 1):
 on shared 2-core machines a default OpenBLAS pool made a 214×214 solve ~20x slower than one

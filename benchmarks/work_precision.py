@@ -463,8 +463,8 @@ def main(argv=None):
         for r in rows:
             w.writerow({k: r.get(k) for k in FIELDS})
     plot(rows, panels, _harness.describe(), out / f"{name}.png")
-    command = "python -m benchmarks.work_precision" + (" --quick" if args.quick else "")
-    write_md(rows, panels, refs, out / f"{name}.md", command, time.perf_counter() - start)
+    write_md(rows, panels, refs, out / f"{name}.md", _harness.command(argv),
+             time.perf_counter() - start)
     print("\n".join(speed_table(rows, panels) + [""] + front_table(rows, panels) + [""]
                     + front_table(rows, panels, "pointwise")))
     print(f"wrote {out / name}.{{csv,md,png}} in {time.perf_counter() - start:.0f} s")
