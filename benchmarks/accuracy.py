@@ -1,6 +1,6 @@
 """Accuracy of lubjax's defaults against converged runs, pointwise, over a long hold.
 
-    python benchmarks/accuracy.py [--quick] [--rtol 1e-3] [--out benchmarks/out/accuracy.md]
+    python -m benchmarks.accuracy [--quick] [--rtol 1e-3] [--out benchmarks/out/accuracy.md]
 
 Cases: β ∈ {1, 10, 100, 1000} × z̄0 ∈ {0.5, 0.9, 1, 1.11, 2}, ramp then hold to t̄ = 10³. Every
 run is read at the same output times (500 in [0.01, 5], 200 log-spaced in [5, 10³]) by the
@@ -23,7 +23,6 @@ Columns (all maxima over the output times):
 
 from __future__ import annotations
 
-import argparse
 import csv
 import hashlib
 import os
@@ -32,12 +31,10 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
-import lubjax  # noqa: E402
-from benchmarks.machine import label, write_report  # noqa: E402
-from lubjax._discretisation import DISCRETISATION  # noqa: E402
-from lubjax._mesh import final_contact_radius  # noqa: E402
+import lubjax
+from benchmarks import _harness
+from lubjax._discretisation import DISCRETISATION
+from lubjax._mesh import final_contact_radius
 
 BETAS = (1.0, 10.0, 100.0, 1000.0)
 Z0S = (0.5, 0.9, 1.0, 1.11, 2.0)
@@ -56,7 +53,7 @@ REFERENCE = lubjax.Settings(rtol=1e-7, dr=0.005, mesh_growth=1.05, length=2000.0
 FAR_CHECK = lubjax.Settings(rtol=1e-7, dr=0.005, mesh_growth=1.1, length=1000.0, **_TIGHT)
 REFERENCE_CHECK = lubjax.Settings(rtol=3e-7, dr=0.0075, mesh_growth=1.15, length=500.0, **_TIGHT)
 CHECKS = {"ref": REFERENCE, "far": FAR_CHECK, "check": REFERENCE_CHECK}
-CACHE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out", "cache")
+CACHE = os.path.join(_harness.OUT, "cache")
 FIELDS = ("force", "film_center", "film_min")
 
 
@@ -119,18 +116,16 @@ def errors(run_out, ref):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--quick", action="store_true", help="β ∈ {10, 1000}, z̄0 ∈ {0.5, 1.11}")
+    ap = _harness.parser(__doc__, "accuracy.md", quick="β ∈ {10, 1000}, z̄0 ∈ {0.5, 1.11}")
     ap.add_argument("--rtol", type=float, default=None, help="tolerance of the runs checked")
     ap.add_argument("--dr", type=float, default=None, help="fine-zone mesh spacing of the runs")
     ap.add_argument("--contact-radius", default=None, choices=("auto",),
                     help="refine the checked runs at the contact edge (Settings.contact_radius)")
-    ap.add_argument("--out", default="benchmarks/out/accuracy.md")
     ap.add_argument("--betas", type=float, nargs="*", default=None)
     ap.add_argument("--z0s", type=float, nargs="*", default=None)
     ap.add_argument("--cached-only", action="store_true",
                     help="skip cases whose reference runs are not cached yet")
-    args = ap.parse_args(argv)
+    args = _harness.parse(ap, argv)
     betas, z0s = ((10.0, 1000.0), (0.5, 1.11)) if args.quick else (BETAS, Z0S)
     betas = args.betas or betas
     z0s = args.z0s or z0s
@@ -164,7 +159,6 @@ def main(argv=None):
                 f"{k} {v:.2e}" for k, v in row.items() if isinstance(v, float)
                 and k not in ("beta", "z0")), file=sys.stderr)
     keys = list(rows[0])
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     with open(args.out.replace(".md", ".csv"), "w", newline="") as fh:
         w = csv.DictWriter(fh, keys)
         w.writeheader()
@@ -173,7 +167,7 @@ def main(argv=None):
         f"Settings(rtol={settings.rtol:g}, dr={settings.dr}, "
         f"contact_radius={settings.contact_radius!r}) "
         f"against converged runs, t̄ ∈ [0, 10³]; "
-        f"{time.strftime('%Y-%m-%d')}, {label()}.",
+        f"{time.strftime('%Y-%m-%d')}, {_harness.label()}.",
         "",
         "| " + " | ".join(keys) + " |",
         "|" + "---|" * len(keys),
@@ -182,7 +176,7 @@ def main(argv=None):
         lines.append("| " + " | ".join(
             f"{row[k]:.2e}" if isinstance(row[k], float) and k not in ("beta", "z0", "run_s")
             else (f"{row[k]:.2f}" if k == "run_s" else f"{row[k]:g}") for k in keys) + " |")
-    write_report(args.out, lines)
+    _harness.write_report(args.out, lines)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """The default run's cost: compile and run time against the tolerance, estimate on and off.
 
-    python benchmarks/default_run.py [--repeat 5]
+    python -m benchmarks.default_run [--repeat 5]
 
 Issue "Error control", item 8 asks the default run (β = 100, z̄0 = 0.5, t̄ ≤ 5) for no more than
 0.16 s run and 0.9 s compile on a quiet 2-core machine (the figures of the old hand-tuned
@@ -17,7 +17,6 @@ Writes benchmarks/out/default_run.md with the machine and its load averages.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import statistics
@@ -25,9 +24,8 @@ import subprocess
 import sys
 import tempfile
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-OUT = os.path.join(ROOT, "benchmarks", "out")
+from benchmarks import _harness
+from benchmarks._harness import OUT, ROOT
 
 CHILD = r"""
 import json, sys, os, time
@@ -52,11 +50,11 @@ def main(argv=None):
     import numpy as np
 
     from benchmarks import accuracy
-    from benchmarks.machine import describe, write_report
+    from benchmarks._harness import describe, write_report
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = _harness.parser(__doc__)
     ap.add_argument("--repeat", type=int, default=5)
-    args = ap.parse_args(argv)
+    args = _harness.parse(ap, argv)
     t = np.linspace(0.01, 5.0, 500)
     ref = accuracy.reference(100.0, 0.5, accuracy.REFERENCE, "ref")
     ref_force = np.interp(t, accuracy.T_OUT, ref["force"])
@@ -86,7 +84,7 @@ def main(argv=None):
     lines = [
         f"# The default run's cost ({describe()})",
         "",
-        f"`python benchmarks/default_run.py --repeat {args.repeat}`: `relax(100, 0.5, t_end=5)`, "
+        f"`python -m benchmarks.default_run --repeat {args.repeat}`: `relax(100, 0.5, t_end=5)`, "
         "a fresh process per row; compile = the first call's `compile_s`; run = best / median of "
         f"{args.repeat} further calls' `run_s`; error = max |F̄ - F̄_ref| / peak on t̄ ∈ [0.01, 5] "
         "against benchmarks/accuracy.py's reference (rtol 1e-7). Defaults: rtol 1e-4, estimate on. "

@@ -1,7 +1,7 @@
 """Accuracy of the drives (force control, free sphere) against converged runs, and the
 restitution chart.
 
-    python benchmarks/drives.py [--quick] [--out benchmarks/out/drives.md]
+    python -m benchmarks.drives [--quick] [--out benchmarks/out/drives.md]
 
 1. Creep of the paper's tribometer: R = 2 mm, E* = 3.92 MPa, η = 100 Pa s, z0 = 140 μm, a load
    of 30 mN ramped in 1 s and held to 60 s (``lubjax creep`` with those numbers). The approach
@@ -22,21 +22,17 @@ References are cached in benchmarks/out/cache/drives_* (delete to recompute).
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
-import sys
 import time
 from functools import partial
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import lubjax
+from benchmarks import _harness
+from benchmarks._harness import OUT, label
 
-import lubjax  # noqa: E402
-from benchmarks.machine import label  # noqa: E402
-
-OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out")
 CACHE = os.path.join(OUT, "cache")
 REFERENCE = lubjax.Settings(rtol=1e-6, atol=1e-14, dr=0.005, mesh_growth=1.02, length=2000.0,
                             max_steps=400_000, error_estimate=False)  # fmt: skip
@@ -80,10 +76,10 @@ def bounce(beta, stokes, settings, t_end=12.0):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = _harness.parser(__doc__)
     ap.add_argument("--quick", action="store_true", help="fewer St values, one ε")
     ap.add_argument("--out", default=os.path.join(OUT, "drives.md"))
-    args = ap.parse_args(argv)
+    args = _harness.parse(ap, argv)
     default = lubjax.Settings()
     lines = [f"Drives against converged runs; {time.strftime('%Y-%m-%d')}, {label()}.", ""]
 

@@ -1,7 +1,7 @@
 """A fresh process's first ``relax(100, 0.5, 5)`` at each git revision given, with that
 revision's defaults: what a user waits for, measured side by side in one run.
 
-    python benchmarks/first_call.py f1635a7 6c71a6e HEAD [--repeat 5] [--t-end 1e6] [--no-estimate]
+    python -m benchmarks.first_call f1635a7 6c71a6e HEAD [--repeat 5] [--t-end 1e6] [--no-estimate]
 
 Issue "Error control", item 8 asks for no slower than "today's 0.16 s run / 0.9 s compile": the
 hand-tuned grid of commit f1635a7 (before the error-controlled stepper), measured on another
@@ -19,16 +19,14 @@ without the estimate's coarse-mesh program; it writes benchmarks/out/first_call_
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
 import sys
 import tempfile
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-OUT = os.path.join(ROOT, "benchmarks", "out")
+from benchmarks import _harness
+from benchmarks._harness import OUT, ROOT
 
 CHILD = r"""
 import json, sys, time
@@ -50,15 +48,15 @@ print(json.dumps(dict(import_s=imported - start, compile_s=first.compile_s,
 
 
 def main(argv=None):
-    from benchmarks.machine import describe, median_range, write_report
+    from benchmarks._harness import describe, median_range, write_report
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = _harness.parser(__doc__)
     ap.add_argument("revisions", nargs="+")
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--t-end", type=float, default=5.0)
     ap.add_argument("--no-estimate", action="store_true",
                     help="Settings(error_estimate=False) where the revision has it")
-    args = ap.parse_args(argv)
+    args = _harness.parse(ap, argv)
     results = {rev: [] for rev in args.revisions}
     with tempfile.TemporaryDirectory() as tmp:
         trees = {}
@@ -82,7 +80,7 @@ def main(argv=None):
                                check=False)
     keys = ("import_s", "compile_s", "first_call_s", "run_s")
     default = args.t_end == 5.0
-    command = f"python benchmarks/first_call.py {' '.join(args.revisions)} --repeat {args.repeat}"
+    command = f"python -m benchmarks.first_call {' '.join(args.revisions)} --repeat {args.repeat}"
     if not default:
         command += f" --t-end {args.t_end:g}"
     if args.no_estimate:

@@ -1,6 +1,6 @@
 """Fit cost: one fit cold and warm, 100 traces batched, and the optimisers compared.
 
-    python benchmarks/fit_benchmark.py [--only single,batch,optimisers] [--batch 100]
+    python -m benchmarks.fit_benchmark [--only single,batch,optimisers] [--batch 100]
         [--optimistix PATH]   # a folder with optimistix installed (benchmark only, not a dep)
 
 1. ``single``: ``lubjax-fit data/paper_dc140.csv`` as a user runs it, each in a fresh process:
@@ -23,7 +23,6 @@ Writes benchmarks/out/fit_benchmark_<parts>.{json,md}; the machine and its load 
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -33,14 +32,16 @@ import sys
 import tempfile
 import time
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-OUT = os.path.join(ROOT, "benchmarks", "out")
+import numpy as np
+
+from benchmarks import _harness
+from benchmarks._harness import OUT, ROOT
+
 TRACE = os.path.join(ROOT, "data", "paper_dc140.csv")
 
 
 def _machine():
-    from benchmarks.machine import describe
+    from benchmarks._harness import describe
 
     return describe()
 
@@ -78,7 +79,6 @@ def single():
 
 BATCH_CHILD = r"""
 import json, sys, time, numpy as np
-sys.path.insert(0, {root!r})
 import fitting
 from fitting._cache import enable_compilation_cache
 enable_compilation_cache({cache!r})
@@ -289,7 +289,7 @@ def _markdown(report):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = _harness.parser(__doc__)
     p.add_argument("--only", default="single,batch,joint,optimisers")
     p.add_argument("--batch", type=int, default=100)
     p.add_argument("--optimistix", help="folder with optimistix installed (benchmark only)")
@@ -298,7 +298,7 @@ def main(argv=None):
                    "fitting.FIT_SETTINGS'); the outputs get a _rtol<value> suffix")
     p.add_argument("--starts", help="optimisers: comma-separated start labels to run (default: "
                    "all), e.g. 'physics start'")
-    args = p.parse_args(argv)
+    args = _harness.parse(p, argv)
     parts = args.only.split(",")
     # The device layout is the environment's (forced host devices need XLA_FLAGS and
     # PJRT_NPROC before JAX starts): record it with the figures.
@@ -327,8 +327,6 @@ def main(argv=None):
         fh.write(_markdown(report))
     print(_markdown(report))
 
-
-import numpy as np  # noqa: E402  (used by the optimistix runner)
 
 if __name__ == "__main__":
     main()

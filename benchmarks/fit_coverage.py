@@ -1,6 +1,6 @@
 """Are the reported standard errors honest? z-scores over seeded noise draws.
 
-    python benchmarks/fit_coverage.py [--draws 60] [--rho 0 0.8] [--t-bar 3]
+    python -m benchmarks.fit_coverage [--draws 60] [--rho 0 0.8] [--t-bar 3]
 
 Each draw is a clean trace of the fine generator (data/clean/, rtol 1e-7, 544 nodes: not the
 fit's discretisation) plus Gaussian noise of marginal σ = 1 % of the peak force, white (ρ = 0)
@@ -15,18 +15,12 @@ t̄ ≤ ``--t-bar``. Writes benchmarks/out/fit_coverage.md.
 
 from __future__ import annotations
 
-import argparse
 import os
-import sys
 
-import numpy as np
+import fitting
+from benchmarks import _harness
+from benchmarks._harness import ROOT
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-
-import fitting  # noqa: E402
-
-COVERAGE_SETTINGS = fitting.FIT_SETTINGS
 TRUE = {"E_star": "true_E_star_Pa", "viscosity": "true_viscosity_Pa_s", "z0": "true_z0_m"}
 
 
@@ -36,45 +30,6 @@ def clean_trace(stem="paper_dc154", t_bar=3.0):
     keep = tr.time < sc.t_on + t_bar * sc.time_scale
     return tr._replace(time=tr.time[keep], displacement=tr.displacement[keep],
                        force=tr.force[keep])
-
-
-def noise_draws(clean, n, rho=0.0, fraction=0.01, seed=2024):
-    """n noisy copies of ``clean``: stationary AR(1) noise, marginal σ = fraction × peak."""
-    rng = np.random.default_rng(seed)
-    sigma = fraction * float(np.max(clean.force))
-    out = []
-    for k in range(n):
-        e = rng.normal(0.0, sigma, clean.force.size)
-        noise = np.empty_like(e)
-        noise[0] = e[0]
-        for i in range(1, e.size):
-            noise[i] = rho * noise[i - 1] + np.sqrt(1 - rho**2) * e[i]
-        out.append(clean._replace(force=clean.force + noise, name=f"draw{k}"))
-    return out
-
-
-def coverage(draws, clean, settings=COVERAGE_SETTINGS, **fit_kwargs):
-    """rms z per parameter: reported errors, and the white-noise part alone."""
-    results = fitting.fit_traces(draws, settings=settings, **fit_kwargs)
-    table = {}
-    for name, key in TRUE.items():
-        true = float(clean.metadata[key])
-        est = np.array([r.values[name] for r in results])
-        se = np.array([r.stderr[name] for r in results])
-        white = np.array([r.stats["error_parts"]["white"][name] for r in results])
-        solver = np.array([r.stats["error_parts"].get("solver", {}).get(name, 0.0)
-                           for r in results])
-        table[name] = dict(
-            rms_z=float(np.sqrt(np.mean(((est - true) / se) ** 2))),
-            rms_z_white=float(np.sqrt(np.mean(((est - true) / white) ** 2))),
-            mean_bias_over_se=float(np.mean(est - true) / np.mean(se)),
-            scatter_over_se=float(np.std(est, ddof=1) / np.mean(se)),
-            solver_over_se=float(np.mean(solver) / np.mean(se)),
-        )
-    models = sorted({r.stats["noise_model"] for r in results})
-    return dict(table=table, converged=int(sum(r.converged for r in results)), n=len(results),
-                noise_models=models,
-                lag1=float(np.mean([r.stats["autocorrelation_lag1"] for r in results])))
 
 
 def _markdown(rows):
@@ -92,21 +47,22 @@ def _markdown(rows):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = _harness.parser(__doc__)
     p.add_argument("--draws", type=int, default=60)
     p.add_argument("--rho", type=float, nargs="+", default=[0.0, 0.8])
     p.add_argument("--t-bar", type=float, default=3.0)
-    args = p.parse_args(argv)
-    from benchmarks.machine import describe
+    args = _harness.parse(p, argv)
+    from benchmarks._harness import describe
 
     clean = clean_trace(t_bar=args.t_bar)
     rows = []
     for rho in args.rho:
-        out = coverage(noise_draws(clean, args.draws, rho), clean)
+        truth = {name: float(clean.metadata[key]) for name, key in TRUE.items()}
+        out = fitting.coverage(fitting.noise_draws(clean, args.draws, rho), truth)
         rows.append((rho, out))
         print(rho, out, flush=True)
     text = (f"# Coverage of the reported errors ({describe()})\n\n"
-            f"`python benchmarks/fit_coverage.py --draws {args.draws} --rho "
+            f"`python -m benchmarks.fit_coverage --draws {args.draws} --rho "
             f"{' '.join(f'{r:g}' for r in args.rho)} --t-bar {args.t_bar:g}`\n\n"
             + _markdown(rows))
     os.makedirs(os.path.join(ROOT, "benchmarks", "out"), exist_ok=True)

@@ -1,7 +1,7 @@
 """Two revisions side by side on every scene: do they give the same answers?
 
-    python benchmarks/same_answers.py REV_A [REV_B]      # REV_B default: the working tree
-    python benchmarks/same_answers.py REV_A --quick      # the short scenes only
+    python -m benchmarks.same_answers REV_A [REV_B]      # REV_B default: the working tree
+    python -m benchmarks.same_answers REV_A --quick      # the short scenes only
 
 Each revision runs every scene of :data:`SCENES` in its own fresh process (REV_A from a temporary
 git worktree; the working tree as it is), and the outputs are compared array by array: the
@@ -18,7 +18,6 @@ benchmarks/out/same_answers.md.
 
 from __future__ import annotations
 
-import argparse
 import os
 import subprocess
 import sys
@@ -26,6 +25,8 @@ import tempfile
 
 import numpy as np
 
+# The child runs as a plain script under another revision's tree (PYTHONPATH), where benchmarks
+# may differ or be missing: it imports nothing of benchmarks, the parent alone does.
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
@@ -201,20 +202,20 @@ def compare(a: dict, b: dict, limit: float) -> tuple[list[str], bool]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["--child"]:
+        child(argv[1], "--quick" in argv[2:])
+        return 0
+    from benchmarks import _harness
+
+    ap = _harness.parser(__doc__)
     ap.add_argument("rev_a", nargs="?")
     ap.add_argument("rev_b", nargs="?", default=None, help="default: the working tree")
     ap.add_argument("--quick", action="store_true", help="skip the accuracy table's 20 cases")
     ap.add_argument("--limit", type=float, default=1e-12)
-    ap.add_argument("--child", help=argparse.SUPPRESS)
-    args = ap.parse_args(argv)
-    if args.child:
-        child(args.child, args.quick)
-        return 0
+    args = _harness.parse(ap, argv)
     if not args.rev_a:
         ap.error("give the revision to compare with (e.g. HEAD)")
-    sys.path.insert(0, ROOT)
-    from benchmarks.machine import write_report
 
     with tempfile.TemporaryDirectory() as tmp:
         results = {}
@@ -234,12 +235,12 @@ def main(argv=None) -> int:
                     subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", tree],
                                    check=False)
     lines, ok = compare(results["A"], results["B"], args.limit)
-    command = "python benchmarks/same_answers.py " + " ".join(
+    command = "python -m benchmarks.same_answers " + " ".join(
         x for x in (args.rev_a, args.rev_b) if x) + (" --quick" if args.quick else "")
     header = [f"# Same answers: A = {args.rev_a}, B = {args.rev_b or 'the working tree'}", "",
               f"`{command}`: every array of every scene compared; the last column is the "
               "largest |A - B| over the array's largest |A| (and which array).", ""]
-    write_report(os.path.join(ROOT, "benchmarks", "out", "same_answers.md"), header + lines)
+    _harness.write_report(os.path.join(_harness.OUT, "same_answers.md"), header + lines)
     print("SAME" if ok else "DIFFERENT", file=sys.stderr)
     return 0 if ok else 1
 

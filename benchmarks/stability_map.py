@@ -1,7 +1,7 @@
 """Stability map: which methods give finite, positive-film, sensible F̄(t̄) over β × z̄0.
 
-    python benchmarks/stability_map.py --quick   # 4 β × 4 z̄0, Δt̄ ∈ {1e-2, 1e-1}
-    python benchmarks/stability_map.py           # 8 β × 7 z̄0, Δt̄ ∈ {1e-3, 1e-2, 1e-1}
+    python -m benchmarks.stability_map --quick   # 4 β × 4 z̄0, Δt̄ ∈ {1e-2, 1e-1}
+    python -m benchmarks.stability_map           # 8 β × 7 z̄0, Δt̄ ∈ {1e-3, 1e-2, 1e-1}
 
 β log-spaced in [1e-1, 1e6], z̄0 log-spaced in [0.05, 5]. Two kinds of rows:
 
@@ -30,22 +30,18 @@ Writes benchmarks/out/stability_map{,_quick}.{csv,png}.
 
 from __future__ import annotations
 
-import argparse
 import csv
-import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-import benchmarks.methods  # noqa: E402,F401  (pins threads before numpy/jax load)
+import benchmarks.methods  # noqa: F401  (pins threads before numpy/jax load)
+from benchmarks import _harness
 
 # isort: split
-import numpy as np  # noqa: E402
+import numpy as np
 
-import lubjax  # noqa: E402
-from benchmarks import machine  # noqa: E402
-from benchmarks.methods import (  # noqa: E402
+import lubjax
+from benchmarks.methods import (
     common,
     explicit_euler,
     lubjax_variant,
@@ -54,7 +50,7 @@ from benchmarks.methods import (  # noqa: E402
     picard,
 )
 
-OUT = Path(__file__).resolve().parent / "out"
+OUT = Path(_harness.OUT)
 CATEGORIES = ["ok", "inaccurate", "negative force", "negative film", "stalled", "diverged",
               "refused", "no reference"]
 COLORS = ["#4caf50", "#ffeb3b", "#ff9800", "#e91e63", "#3f51b5", "#212121", "#9e9e9e",
@@ -212,7 +208,7 @@ def plot_all(rows, names, betas, z0s, dts, mach, path):
     handles = [Patch(color=c, label=k) for k, c in zip(CATEGORIES, COLORS, strict=True)]
     fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=8, frameon=False)
     fig.suptitle("Stability map, relaxation test (inaccurate: % = max error vs reference on "
-                 "t̄ ≤ 5, L% = long-time check)\n" + machine.label(mach), fontsize=8)
+                 "t̄ ≤ 5, L% = long-time check)\n" + _harness.label(mach), fontsize=8)
     fig.tight_layout(rect=(0.02, 0.05, 1, 0.96))
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -229,7 +225,7 @@ def write(rows, names, betas, z0s, dts, out, suffix):
         w.writeheader()
         for r in rows:
             w.writerow({k: r.get(k) for k in FIELDS})
-    plot_all(rows, names, betas, z0s, dts, machine.describe(),
+    plot_all(rows, names, betas, z0s, dts, _harness.describe(),
              out / f"stability_map{suffix}.png")
 
 
@@ -237,12 +233,12 @@ def main(argv=None):
     import matplotlib
 
     matplotlib.use("Agg")
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = _harness.parser(__doc__)
     ap.add_argument("--quick", action="store_true", help="4 β × 4 z̄0 × Δt̄ ∈ {1e-2, 1e-1}")
     ap.add_argument("--methods", default="paper_scheme,newton,picard,explicit_euler,lubjax_default",
                     help="comma-separated subset (order of the runs and of the figure's rows)")
     ap.add_argument("--out", default=str(OUT))
-    args = ap.parse_args(argv)
+    args = _harness.parse(ap, argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.quick:
@@ -264,7 +260,7 @@ def main(argv=None):
             for beta in betas:
                 for z0 in z0s:
                     ref = reference(beta, z0, t_out, m["ref"])
-                    mach = machine.describe()
+                    mach = _harness.describe()
                     try:
                         f, info = m["run"](beta, z0, t_out, dt)
                     except (lubjax.SolverError, ValueError) as exc:

@@ -1,6 +1,6 @@
 """Where the richer substrates matter: maps of the error of the default elastic half-space.
 
-    python benchmarks/substrate_maps.py [--quick] [--only viscoelastic|layer] [--z0 0.5,1]
+    python -m benchmarks.substrate_maps [--quick] [--only viscoelastic|layer] [--z0 0.5,1]
 
 1. Viscoelastic: a relaxation test (ramp to t̄ = 1, hold to t̄ = 5) on a standard linear solid,
    E(t) = E∞ + (E₀ - E∞) e^{-t/τ}, against the elastic half-space at E*∞ (the relaxed modulus,
@@ -21,22 +21,18 @@ Outputs: benchmarks/out/substrate_maps.md and benchmarks/out/substrate_maps.png
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
-import sys
 import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import lubjax
+from benchmarks import _harness
+from benchmarks._harness import OUT, label
 
-import lubjax  # noqa: E402
-from benchmarks.machine import label  # noqa: E402
-
-OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "out")
 SETTINGS = lubjax.Settings(error_estimate=False)
 TIMES = np.linspace(0.0, 5.0, 501)
 PAPER = dict(radius=2e-3, thickness=5e-3, indents=(126e-6, 140e-6, 154e-6), betas=(41, 54, 68))
@@ -99,12 +95,12 @@ def paper_points():
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = _harness.parser(__doc__)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", choices=("viscoelastic", "layer"))
     ap.add_argument("--z0", help="layer map: comma-separated z̄0 values (default 0.5,1; "
                     "--quick: 1)")
-    args = ap.parse_args(argv)
+    args = _harness.parse(ap, argv)
     z0s = tuple(float(v) for v in args.z0.split(",")) if args.z0 else None
     import matplotlib
 
@@ -130,10 +126,8 @@ def main(argv=None):
             lines.append(f"| {m:g} | " + " | ".join(f"{e:.1e}" for e in best[i]) + " |")
         lines.append("")
     if args.only in (None, "layer"):
-        try:
-            import lubjax._layer  # noqa: F401
-        except ImportError:
-            print("lubjax/_layer.py not available: layer map skipped", flush=True)
+        if not hasattr(lubjax, "Layer"):
+            print("this lubjax has no Layer substrate: layer map skipped", flush=True)
         else:
             print("layer map ...", flush=True)
             lay = layer_map(args.quick, z0s)

@@ -1,8 +1,8 @@
 """Work-precision chart for the relaxation test: run time against error in F̄(t̄), t̄ ∈ [0, 1]
 and t̄ ∈ [0, 5], every method timed in the same run on the same machine.
 
-    python benchmarks/work_precision.py --quick   # β=100, z̄0 ∈ {0.5, 2}, fewer levels
-    python benchmarks/work_precision.py           # + β=1e4, z̄0=0.5, all levels
+    python -m benchmarks.work_precision --quick   # β=100, z̄0 ∈ {0.5, 2}, fewer levels
+    python -m benchmarks.work_precision           # + β=1e4, z̄0=0.5, all levels
 
 Methods: (a) the paper's scheme ported to numpy (dense 2N×2N solve per step, uniform Δr̄, L̄ = 4,
 uniform Δt̄) — the baseline, its own settings Δr̄ = 0.01, Δt̄ = 1e-3 marked; (b) ``lubjax.relax``
@@ -26,24 +26,21 @@ Writes benchmarks/out/work_precision{,_quick}.{csv,md,png}.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import hashlib
 import json
-import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-import benchmarks.methods  # noqa: E402,F401  (pins threads before numpy/jax load)
+import benchmarks.methods  # noqa: F401  (pins threads before numpy/jax load)
+from benchmarks import _harness
 
 # isort: split
-import numpy as np  # noqa: E402
+import numpy as np
 
-import lubjax  # noqa: E402
-from benchmarks import accuracy, machine  # noqa: E402
-from benchmarks.methods import (  # noqa: E402
+import lubjax
+from benchmarks import accuracy
+from benchmarks.methods import (
     common,
     explicit_euler,
     lubjax_default,
@@ -54,7 +51,7 @@ from benchmarks.methods import (  # noqa: E402
     picard,
 )
 
-OUT = Path(__file__).resolve().parent / "out"
+OUT = Path(_harness.OUT)
 CASES_FULL = [(100.0, 0.5), (100.0, 2.0), (1e4, 0.5)]
 CASES_QUICK = [(100.0, 0.5), (100.0, 2.0)]
 HORIZONS = {1.0: 0.01, 5.0: 0.05}  # t̄_end: output spacing
@@ -200,10 +197,10 @@ def run_case(beta, z0, t_end, quick, ref_all, check_all):
                  n_steps=0, n_nodes=0,
                  extra=json.dumps(dict(ref=repr(REFERENCE), check=repr(REFERENCE_CHECK))))]
     for r in rows:
-        r.update(machine.describe())
+        r.update(_harness.describe())
     for group, label, module, opts in method_runs(quick, t_end):
         t0 = time.perf_counter()
-        mach = machine.describe()
+        mach = _harness.describe()
         try:
             f, info = module.run(beta, z0, t_out, **opts)
         except Exception as exc:  # a method that refuses or crashes is a data point too
@@ -220,7 +217,7 @@ def run_case(beta, z0, t_end, quick, ref_all, check_all):
         print(f"  β={beta:g} z0={z0:g} t≤{t_end:g} {group[:44]:44s} {label:30s} err={err:9.2e} "
               f"run={info['wall_s']:8.3f}s compile={info['compile_s']:6.2f}s ok={info['ok']} "
               f"load={mach['load1']} ({time.perf_counter() - t0:.1f}s)", flush=True)
-    mach = machine.describe()
+    mach = _harness.describe()
     rows += [dict(r, **mach) for r in explicit_rows(beta, z0, t_end)]
     for r in rows:
         r.update(beta=beta, z0=z0, t_end=t_end)
@@ -314,7 +311,7 @@ def plot(rows, panels, mach, path):
     handles, labels = axes.flat[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
     fig.suptitle("Relaxation test work-precision (circled: paper's settings Δr̄=0.01 Δt̄=1e-3 / "
-                 "lubjax default rtol 1e-4; x at the right: failed)\n" + machine.label(mach),
+                 "lubjax default rtol 1e-4; x at the right: failed)\n" + _harness.label(mach),
                  fontsize=10)
     fig.tight_layout(rect=(0, 0.025 + 0.03 * ((len(labels) + 1) // 2) / nrow, 1, 0.95))
     fig.savefig(path, dpi=100)
@@ -396,9 +393,9 @@ def front_table(rows, panels, metric="error"):
 
 
 def write_md(rows, panels, refs, path, command, elapsed):
-    mach = machine.describe()
+    mach = _harness.describe()
     out = [f"# Work-precision, relaxation test\n\n`{command}` ({elapsed:.0f} s in all); "
-           f"{machine.label(mach)} at the end (each row's load is in the CSV).\n",
+           f"{_harness.label(mach)} at the end (each row's load is in the CSV).\n",
            "Error: max |F̄ - F̄_ref| / max F̄_ref at the output times; pointwise: max |F̄/F̄_ref "
            f"- 1| where F̄_ref > {PEAK_FRACTION:g} of its peak. Run time excludes compilation "
            "and one-off setup (compile_s).\n",
@@ -434,11 +431,11 @@ def write_md(rows, panels, refs, path, command, elapsed):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = _harness.parser(__doc__)
     ap.add_argument("--quick", action="store_true", help="β=100 only, fewer levels")
     ap.add_argument("--out", default=str(OUT))
     ap.add_argument("--replot", action="store_true", help="redraw the PNG from the CSV")
-    args = ap.parse_args(argv)
+    args = _harness.parse(ap, argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cases = CASES_QUICK if args.quick else CASES_FULL
@@ -465,9 +462,9 @@ def main(argv=None):
         w.writeheader()
         for r in rows:
             w.writerow({k: r.get(k) for k in FIELDS})
-    plot(rows, panels, machine.describe(), out / f"{name}.png")
-    command = "python benchmarks/work_precision.py" + (" --quick" if args.quick else "")
-    write_md(rows, panels, refs, out / f"{name}.md", command, time.perf_counter() - start)
+    plot(rows, panels, _harness.describe(), out / f"{name}.png")
+    write_md(rows, panels, refs, out / f"{name}.md", _harness.command(argv),
+             time.perf_counter() - start)
     print("\n".join(speed_table(rows, panels) + [""] + front_table(rows, panels) + [""]
                     + front_table(rows, panels, "pointwise")))
     print(f"wrote {out / name}.{{csv,md,png}} in {time.perf_counter() - start:.0f} s")

@@ -185,7 +185,7 @@ def compare(only=None):
     nothing. The creep trace (no clean file) is skipped."""
     from fitting import read_trace
 
-    # the 5 mm layer's traces are benchmarks/layer_fit_bias.py's, from clean_force too
+    # the 5 mm layer's traces are benchmarks/studies/layer_fit_bias.py's, from clean_force too
     layer5mm = [(f"layer5mm_dc{um}", um * 1e-6, 100.0, 0.01, 0, "layer:5e-3")
                 for um in (126, 140, 154)]
     for stem, indent, viscosity, _, _, kind in CASES + layer5mm:

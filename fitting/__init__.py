@@ -10,13 +10,15 @@ Public API (see the module docstrings for the maths):
   :func:`compare_models`, :func:`initial_guess`, :class:`FitResult`, :class:`Start`;
 * :func:`scales_from_trace`, :class:`Scales`, :func:`predict`, :func:`residuals`,
   :func:`residuals_and_jacobian`, :func:`trace_data`, :func:`make_solver` — the model;
-* :func:`result_to_dict`, :func:`fit_report`, :func:`plot_fit` — reports and the figure.
+* :func:`result_to_dict`, :func:`fit_report`, :func:`plot_fit` — reports and the figure;
+* :func:`noise_draws`, :func:`coverage` — are the reported errors honest (seeded noise draws)?
 """
 
 import lubjax  # noqa: F401  (enables float64 in JAX)
 
 from ._cli import plot_fit, summary_line, write_table
 from ._compare import compare_models
+from ._coverage import coverage, noise_draws
 from ._fit import FitResult, Start, fit_trace, fit_traces, initial_guess
 from ._io import Trace, format_trace, make_trace, parse_trace, read_trace, write_trace
 from ._model import (
@@ -45,6 +47,7 @@ __all__ = [
     "Trace",
     "TraceData",
     "compare_models",
+    "coverage",
     "fit_report",
     "fit_trace",
     "fit_traces",
@@ -53,6 +56,7 @@ __all__ = [
     "make_solver",
     "make_trace",
     "noise_level",
+    "noise_draws",
     "parse_trace",
     "plot_fit",
     "predict",

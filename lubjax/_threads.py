@@ -6,12 +6,14 @@ machine OpenBLAS's spinning threads oversubscribe the cores: the default run the
 0.15 s to tens of seconds (issue "Error control", item 8).
 ``threadpoolctl`` (maintained by the scikit-learn developers) limits the threads of the BLAS
 libraries already loaded in this process, for the duration of a call, and restores them after.
+``LUBJAX_BLAS_LIMIT=0`` leaves BLAS's own thread count alone (to measure what the limit buys).
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
+import os
 
 
 @functools.lru_cache(maxsize=1)
@@ -23,6 +25,10 @@ def _controller():
 
 @contextlib.contextmanager
 def single_threaded_blas():
-    """Limit BLAS to one thread inside the block (no-op if no BLAS pool is found)."""
+    """Limit BLAS to one thread inside the block (no-op if no BLAS pool is found, or with
+    ``LUBJAX_BLAS_LIMIT=0``)."""
+    if os.environ.get("LUBJAX_BLAS_LIMIT", "1").strip().lower() in ("0", "off", "no", "false"):
+        yield
+        return
     with _controller().limit(limits=1, user_api="blas"):
         yield

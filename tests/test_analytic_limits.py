@@ -6,6 +6,7 @@ import pytest
 import lubjax
 
 
+@pytest.mark.slow
 def test_rigid_squeeze_film_during_loading():
     """β = 10⁴, z̄0 = 2: elasticity is negligible and F̄ = π/(2βz̄) (eq 12b)."""
     beta, z0 = 1e4, 2.0
@@ -17,6 +18,7 @@ def test_rigid_squeeze_film_during_loading():
 
 
 @pytest.mark.parametrize("kind", ["travel", "spring"])
+@pytest.mark.slow
 def test_rigid_squeeze_film_at_a_crawl(kind):
     """The same limit at a speed of 1e-13: per step the gap moves by ~1e-14, a few ulps of z̄0 = 2.
     The step's Δz̄ must come from the travel's own increment: formed as a difference of gaps it
@@ -75,6 +77,7 @@ def test_small_indentation_force_decays_in_the_hold():
     assert np.all(rate > 0) and np.ptp(rate[len(rate) // 2:]) < 0.05 * rate[-1]
 
 
+@pytest.mark.slow
 def test_long_hold_reaches_hertz():
     """β = 100, z̄0 = 0.5: the hold relaxes to F̄∞ = (2π/3)(1 - z̄0)^{3/2} (eq 16) and to the
     Hertz pressure (eq 14) — at t̄ = 10⁴, which growing hold steps reach in a few hundred steps."""

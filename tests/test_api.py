@@ -105,6 +105,7 @@ def test_bad_times_and_settings_are_clear_errors():
         lubjax.relax(1e300, 0.5)
 
 
+@pytest.mark.slow
 def test_sampled_history_matches_ideal_ramp():
     """One code path: a finely sampled ramp-and-hold gives the ideal ramp's force."""
     t = np.linspace(0.0, 3.0, 3001)
@@ -130,6 +131,7 @@ def test_sampled_history_is_the_monotone_cubic():
     np.testing.assert_allclose(hist.travel([t[0] - 1, t[-1] + 1]), [d[0], d[-1]], atol=0)
 
 
+@pytest.mark.slow
 def test_smoothed_start_eq_23():
     ramp = lubjax.RampHold(t_accel=0.1)
     t = np.array([-0.1, -0.05, 0.0, 0.5, 1.0, 2.0])
@@ -140,6 +142,7 @@ def test_smoothed_start_eq_23():
     assert res.t[0] == pytest.approx(-0.1) and res.ok
 
 
+@pytest.mark.slow
 def test_vmap_and_forward_gradient_in_beta_and_z0():
     settings = lubjax.Settings(dr=0.05, mesh_growth=1.1, length=50.0, rtol=1e-9,
                                max_steps=100_000, error_estimate=False)
@@ -166,6 +169,7 @@ def test_vmap_and_forward_gradient_in_beta_and_z0():
         assert np.max(np.abs(J[:, k] - fd)) < 1e-4 * scale, k
 
 
+@pytest.mark.slow
 def test_cli_dimensionless_and_si(tmp_path):
     out = tmp_path / "run.json"
     png = tmp_path / "run.png"

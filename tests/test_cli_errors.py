@@ -31,9 +31,9 @@ from fitting._io import TraceError, parse_trace, read_trace
 from fitting._model import ModelSpec, Scales
 from lubjax import _files
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DATA = os.path.join(ROOT, "data")
-SEED = os.path.join(DATA, "paper_dc140.csv")
+from helpers import ROOT
+from helpers import SEED_TRACE as SEED
+
 SI = ["--E-star", "3.92e6", "--viscosity", "100", "--radius", "2e-3", "--speed", "1e-4",
       "--indent", "140e-6", "--gap", "140e-6"]  # fmt: skip
 
@@ -345,6 +345,7 @@ def test_relax_passes_the_viscoelastic_solid_to_the_solver(tmp_path, monkeypatch
     assert rec["prony_tau_s"] is None and rec["prony_tau_bar"] == [2.0]
 
 
+@pytest.mark.slow
 def test_relax_viscoelastic_peak_force_above_the_relaxed_half_space(tmp_path, capsys):
     """End to end: during the ramp (t_c = 1.4 s, τ = 0.7 s) the solid is stiffer than its relaxed
     modulus (up to E*0 = 2 E*∞), so the peak force exceeds the half-space's at E*∞ = --E-star,

@@ -24,8 +24,9 @@ from fitting._model import ModelSpec, Scales, to_theta
 from fitting._report import fit_report, short_value
 from lubjax import RelaxationTest
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SEED = os.path.join(ROOT, "data", "paper_dc140.csv")
+from helpers import DATA
+from helpers import SEED_TRACE as SEED
+
 CONTROL = ("\r", "\x1b")
 
 
@@ -244,7 +245,7 @@ def test_fit_help_examples_run(capsys, monkeypatch, tmp_path):
     monkeypatch.setattr(fcli, "fit_traces", _fake_fit_traces)
     monkeypatch.setattr(fcompare, "fit_traces", _recording_fit([]))
     monkeypatch.chdir(tmp_path)
-    os.symlink(os.path.join(ROOT, "data"), tmp_path / "data")
+    os.symlink(DATA, tmp_path / "data")
     for argv in examples:
         assert fcli.main(argv) == 0, capsys.readouterr().err
 

@@ -10,7 +10,7 @@ from lubjax import _compiler
 from lubjax._discretisation import discretise
 from lubjax._rollout import evaluate_host, rollout
 
-COARSE = dict(dr=0.05, mesh_growth=1.1, length=100.0, error_estimate=False, contact_radius=None)
+from helpers import COARSE
 
 
 def _run(settings):

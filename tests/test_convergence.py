@@ -2,6 +2,7 @@
 differences). The order in time, through the tolerance, is in test_stepper.py."""
 
 import numpy as np
+import pytest
 
 import lubjax
 
@@ -15,6 +16,7 @@ def _observed_order(values, ratio=2.0):
     return -slope / np.log(ratio)
 
 
+@pytest.mark.slow
 def test_space_order_is_two():
     """Conservative finite volumes with hat-function pressure: second order on smooth solutions
     (z̄ stays ≥ 0.2 here, so there is no contact edge to spoil it). Time error negligible:
@@ -36,6 +38,7 @@ def test_nested_coarse_mesh_keeps_every_other_node():
     assert coarse.size == (mesh.size + 1) // 2
 
 
+@pytest.mark.slow
 def test_contact_edge_refinement_resolves_the_late_neck():
     """In a long hold with z̄0 < 1 the film drains through a neck at the Hertz edge, ~h̄_min^{2/3}
     wide. Against a run refined everywhere (dr = 0.007, and dr/7 at the edge, rtol 1e-5), the

@@ -158,6 +158,7 @@ def test_restitution_rises_with_stokes_number():
     [lubjax.Load(1.0), lubjax.Spring(5.0), lubjax.FreeSphere(20.0, -1.0, 0.1)],
     ids=["load", "spring", "free"],
 )
+@pytest.mark.slow
 def test_drive_gradients_reverse_forward_and_differences(drive):
     """d(gap at a few times)/d(β, the drive's number): reverse (checkpointed scan) = forward
     (jvp) to 1e-6; forward = central differences of the adaptive solution. As in

@@ -8,7 +8,6 @@ discretisation error.
 
 import json
 import math
-import os
 
 import jax
 import jax.numpy as jnp
@@ -18,31 +17,9 @@ import pytest
 import fitting
 import lubjax
 
-DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data")
-PAPER = ["paper_dc126", "paper_dc140", "paper_dc154"]
-TRUE = {"E_star": "true_E_star_Pa", "viscosity": "true_viscosity_Pa_s", "z0": "true_z0_m",
-        "stiffening": "true_stiffening", "relaxation_time": "true_relaxation_time_s"}
+from helpers import FIT_COARSE, PAPER, SEED_TRACE, TRUE, read_data, short_trace
 
-
-def _trace(stem, clean=False):
-    path = (
-        os.path.join(DATA, "clean", f"{stem}_clean.csv")
-        if clean
-        else os.path.join(DATA, f"{stem}.csv")
-    )
-    return fitting.read_trace(path)
-
-
-COARSE = lubjax.Settings(dr=0.05, mesh_growth=1.2, length=100.0, error_estimate=False)
 SPEC = fitting.ModelSpec()
-
-
-def _short(stem, t_bar, clean=True):
-    tr = _trace(stem, clean=clean)
-    sc = fitting.scales_from_trace(tr)
-    keep = tr.time < sc.t_on + t_bar * sc.time_scale
-    tr = tr._replace(time=tr.time[keep], displacement=tr.displacement[keep], force=tr.force[keep])
-    return tr, fitting.scales_from_trace(tr)
 
 
 def _z_scores(res, tr):
@@ -57,6 +34,7 @@ def _assert_recovers(res, tr, z_max=3.0):
     assert z and all(abs(v) < z_max for v in z.values()), (tr.name, z)
 
 
+@pytest.mark.slow
 def test_gradient_matches_central_differences():
     """∂F/∂(E*, η, z0) in SI by jacfwd vs central differences, through the measured history.
 
@@ -65,7 +43,7 @@ def test_gradient_matches_central_differences():
     ε = 1e-3·|x| the quotient scatters by ≤ 5e-4 of the largest derivative (ε = 1e-4 is
     noise-dominated, ε = 1e-2 truncation-dominated for z0). The smooth-history check at 1e-4 is
     tests/test_stepper.py."""
-    tr, sc = _short("paper_dc140", 2.5)
+    tr, sc = short_trace("paper_dc140", 2.5)
     settings = lubjax.Settings(rtol=1e-7, dr=0.05, mesh_growth=1.2, length=100.0,
                                max_steps=100_000)
     solver = fitting.make_solver(settings)
@@ -88,16 +66,18 @@ def test_gradient_matches_central_differences():
 
 @pytest.mark.parametrize(
     "spec, stem, z0",
-    [(SPEC, "paper_dc126", 126e-6), (fitting.ModelSpec(viscoelastic=True), "paper_dc126", 126e-6),
-     (fitting.ModelSpec(drive="force"), "creep_30mN", 140e-6)],
-    ids=["elastic", "viscoelastic", "load"])
+    [pytest.param(SPEC, "paper_dc126", 126e-6, id="elastic"),
+     pytest.param(fitting.ModelSpec(viscoelastic=True), "paper_dc126", 126e-6, id="viscoelastic",
+                  marks=pytest.mark.slow),
+     pytest.param(fitting.ModelSpec(drive="force"), "creep_30mN", 140e-6, id="load",
+                  marks=pytest.mark.slow)])
 def test_residual_jacobian_is_forward_mode_and_consistent(spec, stem, z0):
     """The Jacobian by the chain rule through the stepper's inputs (2 tangents for a travel on
     an elastic solid, 3 under load control, 4 viscoelastic) against jax.jacfwd of the residuals
     in all of θ."""
-    tr, sc = _short(stem, 1.5)
-    solver = fitting.make_solver(COARSE)
-    data = fitting.trace_data(tr, sc, spec, COARSE.mesh())
+    tr, sc = short_trace(stem, 1.5)
+    solver = fitting.make_solver(FIT_COARSE)
+    data = fitting.trace_data(tr, sc, spec, FIT_COARSE.mesh())
     theta = [math.log(3.92e6), math.log(100.0), math.log(z0)]
     theta = jnp.array(theta + ([math.log(0.3), math.log(0.5)] if spec.viscoelastic else []) + [0.0])
     r, J, film = jax.jit(fitting.residuals_and_jacobian, static_argnums=3)(
@@ -119,7 +99,7 @@ def test_model_matches_an_independent_fine_solver():
     rms within 3e-4 of the peak, every sample within 3e-3 (measured 1.5e-4 and 2.0e-3, the
     largest where the lagged stage stops: the 100 Hz record of the travel, monotone-cubic
     interpolated, is all the model knows of the motion between samples)."""
-    tr = _trace("paper_dc140", clean=True)
+    tr = read_data("paper_dc140", clean=True)
     sc = fitting.scales_from_trace(tr)
     solver = fitting.make_solver()
     data = fitting.trace_data(tr, sc, SPEC)
@@ -131,7 +111,7 @@ def test_model_matches_an_independent_fine_solver():
 
 @pytest.mark.parametrize("stem", PAPER + ["spring_dc140", "creep_30mN"])
 def test_starting_values_from_physics_are_within_a_factor_two(stem):
-    tr = _trace(stem)
+    tr = read_data(stem)
     spec = fitting.ModelSpec(drive=fitting._model.drive_of(tr))
     st = fitting.initial_guess(tr, fitting.scales_from_trace(tr), spec)
     for name in ("E_star", "viscosity", "z0"):
@@ -140,12 +120,12 @@ def test_starting_values_from_physics_are_within_a_factor_two(stem):
 
 
 def test_drive_from_header_and_option():
-    assert fitting._model.drive_of(_trace("creep_30mN")) == "force"
-    assert fitting._model.drive_of(_trace("spring_dc140")) == "spring"
-    assert fitting._model.drive_of(_trace("paper_dc140")) == "travel"
+    assert fitting._model.drive_of(read_data("creep_30mN")) == "force"
+    assert fitting._model.drive_of(read_data("spring_dc140")) == "spring"
+    assert fitting._model.drive_of(read_data("paper_dc140")) == "travel"
     with pytest.raises(ValueError, match="stiffness_N_m"):
-        fitting._model.drive_of(_trace("paper_dc140"), "spring")
-    sc = fitting.scales_from_trace(_trace("creep_30mN"))
+        fitting._model.drive_of(read_data("paper_dc140"), "spring")
+    sc = fitting.scales_from_trace(read_data("creep_30mN"))
     assert sc.input_end == pytest.approx(0.03, rel=1e-6)  # the load's plateau
     assert sc.time_scale == pytest.approx(1.0, rel=0.1)  # the ramp time
 
@@ -160,7 +140,7 @@ def test_separate_and_joint_fits_of_the_paper_traces():
 
     Within 3.5 rather than 3 standard errors: the files are fixed noise draws, and the noise of
     paper_dc140.csv alone puts its z0 at -2.9 standard errors (its noise-free twin in
-    data/clean/ fits to -0.2: `python benchmarks/time_error.py --fits`), so at 3 this test
+    data/clean/ fits to -0.2: `python -m benchmarks.studies.time_error --fits`), so at 3 this test
     passed or failed on 0.1 σ of discretisation error, in whichever direction the stepper's
     details put it (-2.85 before the mobility's second stage, -3.15 after; -2.98 and -3.01 at
     rtol 1e-5). Nine z-scores of calibrated errors exceed 3 somewhere with probability 2.4 %,
@@ -172,14 +152,14 @@ def test_separate_and_joint_fits_of_the_paper_traces():
     within 0.5 of the noisy fits' standard errors of the truth (measured 0.005-0.21), and
     their residuals are below 5 % of the noise (measured 0.6-0.9 %). LM's stop is flagged
     there (a decrement relative to a residual variance of ~0 cannot be met), not asserted."""
-    traces = [_trace(s) for s in PAPER]
+    traces = [read_data(s) for s in PAPER]
     separate = fitting.fit_traces(traces)
     for tr, res in zip(traces, separate, strict=True):
         _assert_recovers(res, tr, z_max=3.5)
         assert res.rms_residual == pytest.approx(float(tr.metadata["noise_N"]), rel=0.15)
         assert res.stats["reduced_chi2"] == pytest.approx(1.0, abs=0.15)
         assert res.stats["noise_model"] == "white"
-    twins = fitting.fit_traces([_trace(s, clean=True) for s in PAPER])
+    twins = fitting.fit_traces([read_data(s, clean=True) for s in PAPER])
     for tr, noisy, twin in zip(traces, separate, twins, strict=True):
         bias = {n: (twin.values[n] - float(tr.metadata[TRUE[n]])) / noisy.stderr[n]
                 for n in ("E_star", "viscosity", "z0")}
@@ -203,7 +183,7 @@ def test_fit_recovers_load_controlled_and_spring_traces(stem):
     """Force control (the load is the input, the displacement the response; lubjax.Load) and a
     sphere on a load cell of known stiffness (lubjax.Spring): E*, η, z0 within three standard
     errors of the truth."""
-    tr = _trace(stem)
+    tr = read_data(stem)
     res = fitting.fit_trace(tr)
     assert res.spec.drive == {"creep_30mN": "force", "spring_dc140": "spring"}[stem]
     _assert_recovers(res, tr)
@@ -213,9 +193,10 @@ def test_fit_recovers_load_controlled_and_spring_traces(stem):
 def test_a_very_thick_layer_fits_like_the_half_space():
     """H = 1 m (H̄ ≈ 2000 √(R d_c)) on a rigid base is a half-space to the model's accuracy: the
     layer path (its own influence matrix per trace) gives the half-space's fit."""
-    tr, _ = _short("paper_dc140", 3.0, clean=False)
-    half = fitting.fit_trace(tr, settings=COARSE, model_error=False)
-    thick = fitting.fit_trace(tr, settings=COARSE, model_error=False, layer=(1.0, 0.5, "bonded"))
+    tr, _ = short_trace("paper_dc140", 3.0, clean=False)
+    half = fitting.fit_trace(tr, settings=FIT_COARSE, model_error=False)
+    thick = fitting.fit_trace(tr, settings=FIT_COARSE, model_error=False,
+                              layer=(1.0, 0.5, "bonded"))
     for n in ("E_star", "viscosity", "z0"):
         assert abs(thick.values[n] / half.values[n] - 1) < 0.2 * half.stderr[n] / half.values[n]
 
@@ -225,16 +206,17 @@ def test_model_comparison_asks_for_viscoelasticity_only_when_it_is_there():
     """The same comparison on a trace made with a standard linear solid (E0/E∞ = 1.5,
     τ = 0.5 s) and on one made without: the richer model is chosen for the first, and its
     E0/E∞ and τ recovered; the elastic model for the second."""
-    visco = _trace("visco_dc140")
+    visco = read_data("visco_dc140")
     _, rich, cmp_visco = fitting.compare_models([visco])
     assert cmp_visco["choice"] == cmp_visco["rich"], cmp_visco["report"]
     _assert_recovers(rich[0], visco)
-    plain = _trace("paper_dc140")
+    plain = read_data("paper_dc140")
     _, _, cmp_plain = fitting.compare_models([plain], max_iter=25)
     assert cmp_plain["choice"] == cmp_plain["simple"], cmp_plain["report"]
     assert cmp_plain["delta_bic"] < 0 < cmp_visco["delta_bic"]
 
 
+@pytest.mark.slow
 def test_mapped_and_vmapped_batches_fit_alike_and_map_skips_finished_traces():
     """batching="map" (each trace in turn, finished ones skipped) and "vmap" (all at once) are
     two evaluations of one model: the fits agree to a small part of their errors. Not to the
@@ -245,8 +227,8 @@ def test_mapped_and_vmapped_batches_fit_alike_and_map_skips_finished_traces():
     second stage, 0.007-0.095 σ before it, by which rtol happens to flip a decision, so the
     bound is 0.2 σ; a batching bug (traces mixed, a finished trace stepped on) moves a fit by
     many σ. A mapped call asked for one problem computes only that one."""
-    traces = [_short(s, 2.0, clean=False)[0] for s in PAPER[:2]]
-    fits = {mode: fitting.fit_traces(traces, settings=COARSE, batching=mode, model_error=False)
+    traces = [short_trace(s, 2.0, clean=False)[0] for s in PAPER[:2]]
+    fits = {mode: fitting.fit_traces(traces, settings=FIT_COARSE, batching=mode, model_error=False)
             for mode in ("map", "vmap")}
     for a, b in zip(fits["map"], fits["vmap"], strict=True):
         assert a.converged and b.converged
@@ -256,12 +238,12 @@ def test_mapped_and_vmapped_batches_fit_alike_and_map_skips_finished_traces():
 
     spec = fitting.ModelSpec()
     scales = [fitting.scales_from_trace(tr) for tr in traces]
-    data = _fit._stack_traces(traces, scales, spec, COARSE.mesh())
+    data = _fit._stack_traces(traces, scales, spec, FIT_COARSE.mesh())
     theta0 = np.array([[_model.to_theta(n, fits["map"][t].values[n], scales[t].response_unit)
                         for n in spec.names] for t in range(2)])
     groups = [[0], [1]]
     layout, x0s = _fit._layout(groups, spec, ["a", "b"], theta0, ())
-    evaluate = _fit._Evaluator(data, fitting.make_solver(COARSE), spec, layout, groups,
+    evaluate = _fit._Evaluator(data, fitting.make_solver(FIT_COARSE), spec, layout, groups,
                                batching="map")
     both, one = evaluate(x0s), evaluate(x0s, [1])
     assert one[0] is None and both[0][2] and one[1][2]
@@ -271,7 +253,7 @@ def test_mapped_and_vmapped_batches_fit_alike_and_map_skips_finished_traces():
 
 
 def test_bad_arguments_raise_value_error():
-    tr = _trace("paper_dc126")
+    tr = read_data("paper_dc126")
     with pytest.raises(ValueError, match="method"):
         fitting.fit_traces([tr], method="adam")
     with pytest.raises(ValueError, match="max_iter"):
@@ -281,7 +263,7 @@ def test_bad_arguments_raise_value_error():
     with pytest.raises(ValueError, match="shared: unknown parameter"):
         fitting.fit_traces([tr, tr], shared=("offset",))
     with pytest.raises(ValueError, match="one drive"):
-        fitting.fit_traces([tr, _trace("creep_30mN")])
+        fitting.fit_traces([tr, read_data("creep_30mN")])
     with pytest.raises(ValueError, match="layer thickness"):
         fitting.ModelSpec(layer=(-1.0, 0.5, "bonded"))
     with pytest.raises(ValueError, match="layer base"):
@@ -291,7 +273,7 @@ def test_bad_arguments_raise_value_error():
 def test_cli_writes_json_report_and_plot(tmp_path, capsys):
     from fitting._cli import main
 
-    tr, _ = _short("paper_dc154", 4.0, clean=False)
+    tr, _ = short_trace("paper_dc154", 4.0, clean=False)
     src = tmp_path / "short.csv"
     fitting.write_trace(src, tr)
     out = tmp_path / "sub" / "fit.json"
@@ -333,7 +315,7 @@ def test_cli_model_options_are_checked_before_fitting(argv, message, tmp_path, c
 
     monkeypatch.setattr(_cli, "fit_traces", no_fit)
     monkeypatch.setattr(_cli, "compare_models", no_fit)
-    rc = _cli.main([os.path.join(DATA, "paper_dc140.csv"), *argv, "--quiet", "--no-cache"])
+    rc = _cli.main([SEED_TRACE, *argv, "--quiet", "--no-cache"])
     err = capsys.readouterr().err
     assert rc == 2 and message in err and len(err.strip().splitlines()) == 1, err
 

@@ -8,11 +8,12 @@ import sys
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from fitting import _cache
 from fitting._cache import cache_dir, enable_compilation_cache
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from helpers import ROOT, data_path
 
 
 def _env():
@@ -48,12 +49,13 @@ def test_enable_uses_the_folder_and_the_off_switch(tmp_path, monkeypatch):
         jax.config.update("jax_compilation_cache_dir", before)
 
 
+@pytest.mark.slow
 def test_a_cli_fit_fills_the_cache_and_no_cache_does_not(tmp_path):
     """Two real CLI runs on a short trace: the first writes
     compiled programs into LUBJAX_CACHE_DIR; --no-cache writes none. (The trace is cut at 4 s.)"""
     import fitting
 
-    tr = fitting.read_trace(os.path.join(ROOT, "data", "paper_dc154.csv"))
+    tr = fitting.read_trace(data_path("paper_dc154"))
     keep = tr.time < 4.0
     src = tmp_path / "short.csv"
     fitting.write_trace(src, tr._replace(time=tr.time[keep], displacement=tr.displacement[keep],
@@ -69,6 +71,7 @@ def test_a_cli_fit_fills_the_cache_and_no_cache_does_not(tmp_path):
     assert not (tmp_path / "none").exists()
 
 
+@pytest.mark.slow
 def test_a_lubjax_run_fills_the_cache_reuses_it_alike_and_no_cache_does_not(tmp_path):
     """`lubjax relax` turns the cache on (as lubjax-fit does): a first run fills the folder, a
     second loads from it and gives the identical result; --no-cache writes nothing."""

@@ -8,7 +8,8 @@ import pytest
 
 from fitting import format_trace, make_trace, parse_trace, read_trace, scales_from_trace
 
-DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data")
+from helpers import DATA
+
 HEADER = "# radius_m: 2.0e-3\n# poisson_ratio: 0.5\n# sample: bead 3\n"
 
 

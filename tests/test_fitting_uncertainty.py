@@ -2,17 +2,19 @@
 
 The draws are a clean trace of the fine generator (data/clean/: rtol 1e-7, 544 nodes) plus
 noise; the fit runs at rtol 1e-3 (143 nodes) on the first t̄ ≤ 3 of the trace, so the solver's
-own error is part of the budget (benchmarks/fit_coverage.py: the same with more draws and the
-table of docs/accuracy.md). With N = 24 draws the rms z of honest errors scatters by ≈ ±0.14
-around 1, so the window 0.8–1.2 of the issue is about ±1.4 of that scatter: the seeds are
-fixed, and the benchmark's 60 draws are the firmer number.
+own error is part of the budget (fitting.coverage; the fit_coverage benchmark runs the same
+with more draws for the table of docs/accuracy.md). With N = 24 draws the rms z of honest errors
+scatters by ≈ ±0.14 around 1, so the window 0.8–1.2 is about ±1.4 of that scatter: the seeds
+are fixed, and the benchmark's 60 draws are the firmer number.
 """
 
 import numpy as np
 import pytest
 
-from benchmarks.fit_coverage import clean_trace, coverage, noise_draws
-from fitting import _stats
+import fitting
+from fitting import _stats, coverage, noise_draws
+
+from helpers import short_trace, truth
 
 DRAWS = 24
 
@@ -28,8 +30,8 @@ def _print(label, out):
 @pytest.mark.slow
 def test_white_noise_errors_cover_the_truth():
     """24 draws of 1 % white noise: rms z of E*, η, z0 within 0.8–1.2, white noise detected."""
-    clean = clean_trace()
-    out = coverage(noise_draws(clean, DRAWS, rho=0.0, seed=11), clean)
+    clean, _ = short_trace("paper_dc154", 3.0)
+    out = coverage(noise_draws(clean, DRAWS, rho=0.0, seed=11), truth(clean))
     _print("white", out)
     assert out["converged"] == DRAWS and out["noise_models"] == ["white"]
     for name, t in out["table"].items():
@@ -41,8 +43,8 @@ def test_ar1_noise_is_detected_and_its_errors_cover_the_truth():
     """24 draws of AR(1) noise with ρ = 0.8 (a load cell's low-pass filter): the report switches
     to the AR(1) sandwich by itself (noise="auto"), its rms z lies within 0.8–1.2, while the
     white-noise errors would be far too small (rms z > 1.6: (1+ρ)/(1-ρ) = 9, so ≈ 3 expected)."""
-    clean = clean_trace()
-    out = coverage(noise_draws(clean, DRAWS, rho=0.8, seed=12), clean)
+    clean, _ = short_trace("paper_dc154", 3.0)
+    out = coverage(noise_draws(clean, DRAWS, rho=0.8, seed=12), truth(clean))
     _print("AR(1) 0.8", out)
     assert out["converged"] == DRAWS and out["noise_models"] == ["ar1"]
     assert out["lag1"] == pytest.approx(0.8, abs=0.05)
@@ -82,3 +84,23 @@ def test_solver_error_enters_as_its_parameter_shift():
     shift = -np.linalg.solve(X.T @ X, X.T @ m)
     np.testing.assert_allclose(out["parts"]["solver"], np.outer(shift, shift), rtol=1e-12)
     np.testing.assert_allclose(out["covariance"], out["parts"]["white"] + np.outer(shift, shift))
+
+
+def test_noise_draws_are_seeded_ar1_of_the_given_size():
+    """Each draw adds stationary AR(1) noise: marginal σ = fraction × peak, lag-1 correlation
+    ρ (checked on a long trace: 20000 samples put both within a few percent), same seed, same
+    draws; a correlation outside [0, 1) is refused by name."""
+    n = 20_000
+    t = np.linspace(0.0, 1.0, n)
+    clean = fitting.make_trace(t, 1e-5 * t, np.ones(n), 1e-3)
+    a, b = noise_draws(clean, 2, rho=0.8, fraction=0.01, seed=5)
+    noise = a.force - clean.force
+    assert np.std(noise) == pytest.approx(0.01, rel=0.1)
+    assert np.corrcoef(noise[1:], noise[:-1])[0, 1] == pytest.approx(0.8, abs=0.02)
+    assert not np.array_equal(a.force, b.force)  # independent draws
+    again = noise_draws(clean, 2, rho=0.8, fraction=0.01, seed=5)
+    np.testing.assert_array_equal(again[1].force, b.force)
+    white = noise_draws(clean, 1, rho=0.0, seed=5)[0].force - clean.force
+    assert abs(np.corrcoef(white[1:], white[:-1])[0, 1]) < 0.03
+    with pytest.raises(ValueError, match="rho"):
+        noise_draws(clean, 1, rho=1.0)

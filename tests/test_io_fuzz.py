@@ -10,7 +10,6 @@ arrays, or the same message.
 from __future__ import annotations
 
 import codecs
-import os
 import re
 
 import numpy as np
@@ -18,7 +17,8 @@ import pytest
 
 from fitting._io import MIN_ROWS, TraceError, parse_trace, read_trace
 
-SEED_FILE = os.path.join(os.path.dirname(os.path.dirname(__file__)), "data", "paper_dc140.csv")
+from helpers import SEED_TRACE as SEED_FILE
+
 N_CASES = 400
 SEED = open(SEED_FILE, "rb").read()
 _EOL = re.compile(rb"\r\n|\r|\n")

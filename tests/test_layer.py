@@ -357,6 +357,7 @@ def test_shull_finite_thickness_correction():
     assert np.all(np.abs(disp / disp_shull - 1)[inside] < 0.05), t
 
 
+@pytest.mark.slow
 def test_a_layer_runs_a_smooth_start_on_the_default_mesh():
     """The stage's first-order lag (data/make_synthetic.py: v = 0 at the start) on a 5 mm layer,
     default Settings. This run's steps used to collapse to 1e-15 at t̄ = 2.4e-7 (a strict xfail

@@ -30,19 +30,18 @@ import pytest
 
 import fitting
 
-DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data")
+from helpers import ROOT, data_path, short_trace
+
 LAYER_M = 2e-3
 HALF = fitting.ModelSpec(drive="travel")
 LAYER = fitting.ModelSpec(drive="travel", layer=(LAYER_M, 0.5, "bonded"))
 
 
 def _noisy(stem, seed, t_bar=2.5, fraction=0.01):
-    tr = fitting.read_trace(os.path.join(DATA, "clean", f"{stem}_clean.csv"))
-    sc = fitting.scales_from_trace(tr)
-    keep = tr.time < sc.t_on + t_bar * sc.time_scale
+    tr, _ = short_trace(stem, t_bar)
+    peak = float(np.max(fitting.read_trace(data_path(stem, clean=True)).force))
     rng = np.random.default_rng(seed)
-    force = tr.force[keep] + rng.normal(0.0, fraction * float(np.max(tr.force)), keep.sum())
-    return tr._replace(time=tr.time[keep], displacement=tr.displacement[keep], force=force,
+    return tr._replace(force=tr.force + rng.normal(0.0, fraction * peak, tr.force.size),
                        name=stem)
 
 
@@ -78,11 +77,10 @@ def test_the_cli_compares_the_layer_with_the_half_space(tmp_path):
     src = tmp_path / "layer.csv"
     fitting.write_trace(src, _noisy("layer2mm_dc140", 21))
     out = tmp_path / "fit.json"
-    root = os.path.dirname(DATA)
     proc = subprocess.run(
         [sys.executable, "-m", "fitting", str(src), "--substrate", "layer", "--thickness",
          str(LAYER_M), "--compare", "--no-cache", "--quiet", "--out", str(out)],
-        env=dict(os.environ, PYTHONPATH=root), capture_output=True, text=True)
+        env=dict(os.environ, PYTHONPATH=ROOT), capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     report = json.loads(out.read_text())
     cmp = report["comparison"]

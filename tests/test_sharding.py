@@ -13,7 +13,8 @@ import textwrap
 
 import pytest
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TESTS = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(TESTS)
 
 SWEEP = """
 import os
@@ -55,9 +56,10 @@ print("ok")
 """
 
 FIT = """
-import os
+import dataclasses
 import numpy as np, jax, lubjax, fitting
 from lubjax import _sharding
+from helpers import FIT_COARSE, PAPER, short_trace
 
 N = {n}
 seen = []
@@ -70,15 +72,8 @@ def recording(x):
 
 
 _sharding.to_host = recording
-DATA = os.path.join({root!r}, "data")
-traces = []
-for stem in ["paper_dc126", "paper_dc140", "paper_dc154"]:  # 3 traces: padded on 2 or 4
-    tr = fitting.read_trace(os.path.join(DATA, stem + ".csv"))
-    sc = fitting.scales_from_trace(tr)
-    keep = tr.time < sc.t_on + 1.5 * sc.time_scale
-    traces.append(tr._replace(time=tr.time[keep], displacement=tr.displacement[keep],
-                              force=tr.force[keep]))
-s = lubjax.Settings(dr=0.05, mesh_growth=1.2, length=100.0, error_estimate=False, rtol=1e-3)
+traces = [short_trace(stem, 1.5, clean=False)[0] for stem in PAPER]  # 3: padded on 2 or 4
+s = dataclasses.replace(FIT_COARSE, rtol=1e-3)
 kw = dict(settings=s, model_error=False, max_iter=1)
 many = fitting.fit_traces(traces, **kw)
 n_many = len(seen)
@@ -103,7 +98,7 @@ print("ok")
 
 def _run(code, n):
     env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={n}",
-               PJRT_NPROC=str(n + 1), PYTHONPATH=ROOT)
+               PJRT_NPROC=str(n + 1), PYTHONPATH=os.pathsep.join([ROOT, TESTS]))
     proc = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=env, cwd=ROOT,
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout[-1000:] + proc.stderr[-3000:]
@@ -112,6 +107,7 @@ def _run(code, n):
 
 
 @pytest.mark.parametrize("n", [2, 4])
+@pytest.mark.slow
 def test_sweep_shards_over_host_devices(n):
     """5 pairs on N devices (padded): the forces of the one-device sweep to 1e-12 (they come
     out bit-identical: each device runs the one-device program on its slice), and one
@@ -120,6 +116,7 @@ def test_sweep_shards_over_host_devices(n):
 
 
 @pytest.mark.parametrize("n", [2, 4])
+@pytest.mark.slow
 def test_batched_fit_shards_over_host_devices(n):
     """Three traces fitted in one batch on N devices: every model/Jacobian call returns arrays
     split over the N devices, and at the common starting values the model agrees with the
@@ -132,4 +129,4 @@ def test_batched_fit_shards_over_host_devices(n):
     the model's global error, ~ rtol^(2/3) of the peak (measured 5e-3 at rtol 1e-3). The LM
     iterates then drift apart by a few hundredths of a standard error (and a fit that stalls at
     the model's accuracy can stall on one side only), so whole fits are not compared."""
-    _run(FIT.format(n=n, root=ROOT), n)
+    _run(FIT.format(n=n), n)

@@ -44,6 +44,7 @@ def _lee_radok(t, stiffening, tau, z0):
     return 2 * np.pi / 3 * quad(integrand, z0, min(t, 1.0), limit=200)[0]
 
 
+@pytest.mark.slow
 def test_nearly_dry_contact_relaxes_as_lee_radok():
     """At large β the film drains at once and the contact is Hertz's with the modulus's
     history: the force tends to Lee & Radok's as β grows (error ∝ β^-0.6 measured)."""
@@ -76,6 +77,7 @@ def test_prony_conversion_inverts_the_modulus():
     np.testing.assert_allclose(one.times, sls.times, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_viscoelastic_gradients_reverse_equals_forward():
     """d F̄(t)/d(E₀/E∞, τ) through the internal variables: checkpointed scan = jvp, and both
     = central differences (ε sized to the adaptive solution's step-choice noise, as in

@@ -2,7 +2,7 @@
 ``relax(100, 0.5, 5)``'s run program and its error estimate's coarse-mesh program, one after
 the other and side by side in threads (as ``relax`` does), and with extra XLA options.
 
-    python benchmarks/compile_breakdown.py [--repeat 4] [--options '{"xla_...": ...}']
+    python -m benchmarks.compile_breakdown [--repeat 4] [--options '{"xla_...": ...}']
 
 (default ``--options``: ``{"xla_backend_optimization_level": 1}``)
 
@@ -20,9 +20,7 @@ import os
 import subprocess
 import sys
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-OUT = os.path.join(ROOT, "benchmarks", "out")
+from benchmarks._harness import OUT, ROOT
 
 CHILD = r"""
 import json, sys, time
@@ -95,7 +93,7 @@ def main(argv=None):
     lines = [
         "# Compile time of the default run, by program and phase",
         "",
-        f"`python benchmarks/compile_breakdown.py --repeat {args.repeat} --options "
+        f"`python -m benchmarks.compile_breakdown --repeat {args.repeat} --options "
         f"'{args.options}'`; {label()}. Fresh processes, variants alternating; median (min–max)"
         " in seconds. The default compiler options are lubjax/_compiler.py's CPU_OPTIONS.",
         "",

@@ -1,7 +1,7 @@
 """Domain truncation against the tolerance: the force error of cutting the domain at the L̄ that
 each rtol gets, against the same mesh continued to a domain 20x longer.
 
-    python benchmarks/truncation.py [--out benchmarks/out/truncation.md]
+    python -m benchmarks.truncation [--out benchmarks/out/truncation.md]
 
 The truncation drops the r̄⁻⁴ pressure tail, ≈ 4z̄/L̄² of the force (docs/model.md); the mesh rule
 (lubjax._mesh.mesh_from_tolerance) keeps that below rtol/8 for z̄ ≤ 1. Cases: β = 100 at
@@ -14,16 +14,12 @@ alone and not which steps two controllers chose (those differ by ~rtol themselve
 from __future__ import annotations
 
 import argparse
-import os
-import sys
 import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
-import lubjax  # noqa: E402
-from benchmarks.machine import label, write_report  # noqa: E402
+import lubjax
+from benchmarks.machine import label, write_report
 
 RTOLS = (1e-2, 1e-3, 1e-4, 1e-5)
 TIME_RTOL = 1e-7

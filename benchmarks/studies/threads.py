@@ -1,6 +1,6 @@
 """BLAS threads under load: the default run with the library's single-threaded BLAS, and without.
 
-    python benchmarks/threads.py [--repeat 5] [--busy N]
+    python -m benchmarks.threads [--repeat 5] [--busy N]
 
 Issue "Error control", item 8: on a loaded machine the CPU LAPACK's threads oversubscribe the
 cores and the same run swung from 0.15 s to 33 s. ``lubjax/_threads.py`` limits BLAS to one
@@ -9,8 +9,7 @@ thread around the solves (threadpoolctl). This measures what that buys: the defa
 variant,
 
 - ``limited``: the library as shipped;
-- ``free``: the limit removed (``single_threaded_blas`` patched to a no-op), OpenBLAS's own
-  thread count,
+- ``free``: the limit switched off (``LUBJAX_BLAS_LIMIT=0``), OpenBLAS's own thread count,
 
 each on the machine as it is ("quiet") and with ``--busy`` spinning processes (default 2 per
 core) started beside it ("loaded"). Reported: best and median run time of ``--repeat`` runs
@@ -28,18 +27,14 @@ import subprocess
 import sys
 import time
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-OUT = os.path.join(ROOT, "benchmarks", "out")
+from benchmarks._harness import OUT, ROOT
 
 CHILD = r"""
-import contextlib, json, sys
-import lubjax, lubjax._solve
-if sys.argv[1] == "free":
-    lubjax._solve.single_threaded_blas = contextlib.nullcontext
+import json, sys
+import lubjax
 settings = lubjax.Settings(error_estimate=False)
 lubjax.relax(100, 0.5, 5.0, settings=settings)          # compile
-runs = [lubjax.relax(100, 0.5, 5.0, settings=settings).run_s for _ in range(int(sys.argv[2]))]
+runs = [lubjax.relax(100, 0.5, 5.0, settings=settings).run_s for _ in range(int(sys.argv[1]))]
 from threadpoolctl import threadpool_info
 threads = [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
 print(json.dumps({"runs": runs, "blas_threads": threads}))
@@ -49,8 +44,8 @@ SPIN = "import time\nend = time.time() + 600\nwhile time.time() < end: pass\n"
 
 
 def measure(variant, repeat):
-    env = dict(os.environ, PYTHONPATH=ROOT)
-    proc = subprocess.run([sys.executable, "-c", CHILD, variant, str(repeat)], env=env,
+    env = dict(os.environ, PYTHONPATH=ROOT, LUBJAX_BLAS_LIMIT="0" if variant == "free" else "1")
+    proc = subprocess.run([sys.executable, "-c", CHILD, str(repeat)], env=env,
                           capture_output=True, text=True, check=True)
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
@@ -83,7 +78,7 @@ def main(argv=None):
     lines = [
         f"# BLAS threads under load ({machine})",
         "",
-        f"`python benchmarks/threads.py --repeat {args.repeat} --busy {args.busy}`: "
+        f"`python -m benchmarks.threads --repeat {args.repeat} --busy {args.busy}`: "
         "`relax(100, 0.5, t_end=5)` (estimate off), run time without compilation, "
         f"{args.repeat} runs per cell in a fresh process; loaded = {args.busy} spinning "
         "processes beside it. `limited`: the library (BLAS held to one thread around the "

@@ -2,7 +2,7 @@
 cells of one radial band split in two (every other band unchanged), run at a time tolerance far
 below the mesh's error, against benchmarks/work_precision.py's cached reference.
 
-    python benchmarks/mesh_regions.py [--rtols 1e-4 1e-5] [--time-rtol 1e-8] [--order 2]
+    python -m benchmarks.mesh_regions [--rtols 1e-4 1e-5] [--time-rtol 1e-8] [--order 2]
 
 A band whose refinement lowers the error a lot carries much of it; one whose refinement changes
 nothing is over-resolved for that scene (its nodes cost LU work, ∝ N³, for nothing). Bands:
@@ -22,22 +22,21 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-import benchmarks.methods  # noqa: E402,F401  (pins threads before numpy/jax load)
+import benchmarks.methods  # noqa: F401  (pins threads before numpy/jax load)
 
 # isort: split
-import jax  # noqa: E402
+import jax
 
-import lubjax  # noqa: E402
-from benchmarks import machine  # noqa: E402
-from benchmarks import work_precision as wp  # noqa: E402
+import lubjax
+from benchmarks import machine
+from benchmarks import work_precision as wp
+from benchmarks._harness import OUT
 
 SCENES = [(100.0, 0.5, 1.0), (100.0, 0.5, 5.0), (100.0, 2.0, 5.0)]
 BANDS = [(0.0, 0.6), (0.6, 0.85), (0.85, 1.2), (1.2, 1.6), (1.6, 4.0), (4.0, 10.0),
@@ -115,7 +114,7 @@ def main(argv=None):
                       f"N={mesh.size:4d} error {err:.2e} pointwise {point:.2e} {run_s:.2f} s",
                       file=sys.stderr, flush=True)
     mach = machine.describe()
-    command = ("python benchmarks/mesh_regions.py --rtols "
+    command = ("python -m benchmarks.mesh_regions --rtols "
                + " ".join(f"{r:g}" for r in args.rtols) + f" --time-rtol {args.time_rtol:g}"
                + (f" --order {args.order}" if args.order != 2 else "")
                + (" --trade" if args.trade else ""))
@@ -136,7 +135,7 @@ def main(argv=None):
         lines.append(f"| {beta:g} | {z0:g} | {t_end:g} | {rtol:g} | {label} | {nodes} | "
                      f"{err:.2e} | {point:.2e} | {run_s:.2f} |")
     name = "mesh_regions_trade.md" if args.trade else "mesh_regions.md"
-    machine.write_report(Path(__file__).resolve().parent / "out" / name, lines)
+    machine.write_report(os.path.join(OUT, name), lines)
 
 
 if __name__ == "__main__":

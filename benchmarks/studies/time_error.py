@@ -1,6 +1,6 @@
 """The time error alone, and the paper traces' fitted z-scores at tighter tolerances.
 
-    python benchmarks/time_error.py [--cases 100,2,5 ...] [--fits]
+    python -m benchmarks.time_error [--cases 100,2,5 ...] [--fits]
 
 (1) For each case β, z̄0, t̄_end: F̄ on rtol 1e-3's mesh (fixed: dr, growth, L̄ of
 ``Settings(rtol=1e-3).mesh_parameters()``) at rtol 1e-2, 1e-3, 1e-4 against rtol 1e-7 on that
@@ -20,9 +20,7 @@ import sys
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-OUT = os.path.join(ROOT, "benchmarks", "out")
+from benchmarks._harness import OUT, ROOT
 
 TRUE = {"E_star": "true_E_star_Pa", "viscosity": "true_viscosity_Pa_s", "z0": "true_z0_m"}
 
@@ -80,7 +78,7 @@ def main(argv=None):
     ap.add_argument("--fits", action="store_true")
     args = ap.parse_args(argv)
     lines = ["# Time error on a fixed mesh; fitted z-scores", "",
-             f"`python benchmarks/time_error.py {' '.join(argv or sys.argv[1:])}`; {label()}.", "",
+             f"`python -m benchmarks.time_error {' '.join(argv or sys.argv[1:])}`; {label()}.", "",
              "| β | z̄0 | t̄ ≤ | rtol | max ΔF̄/peak | at t̄ | steps |",
              "|---|---|---|---|---|---|---|"]
     for case in args.cases:

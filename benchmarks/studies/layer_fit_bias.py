@@ -1,6 +1,6 @@
 """How wrong is a half-space fit of the paper's experiment, whose sample was a 5 mm layer?
 
-    python benchmarks/layer_fit_bias.py [--seeds 1] [--only 126,140,154] [--skip-reverse]
+    python -m benchmarks.layer_fit_bias [--seeds 1] [--only 126,140,154] [--skip-reverse]
 
 The paper (Liu et al., Soft Matter 2022 §3.2) pressed a glass bead R = 2 mm into a 5 mm thick
 PDMS layer on a rigid base (d_c = 126, 140, 154 μm) and fitted the half-space model. The
@@ -35,9 +35,8 @@ import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-sys.path.insert(0, os.path.join(ROOT, "data"))
+from benchmarks._harness import ROOT
+
 OUT = os.path.join(ROOT, "benchmarks", "out")
 
 LAYER_M = 5e-3
@@ -53,10 +52,9 @@ def _clean_path(um):
 
 def clean_trace(um, log):
     """The noiseless layer trace for d_c = ``um`` μm (cached in data/clean/)."""
-    import make_synthetic as ms
-
     import fitting
     import lubjax
+    from data import make_synthetic as ms
 
     path = _clean_path(um)
     if os.path.exists(path):
@@ -219,7 +217,7 @@ def main(argv=None):
             log(f"reverse: ΔBIC {row['delta_bic']:.1f}, choice {row['choice']} "
                 f"({time.perf_counter() - t0:.0f} s)")
             rows.append(row)
-    res = dict(command="python benchmarks/layer_fit_bias.py " + " ".join(argv or sys.argv[1:]),
+    res = dict(command="python -m benchmarks.layer_fit_bias " + " ".join(argv or sys.argv[1:]),
                machine=machine, machine_end=label(), wall_s=time.perf_counter() - start,
                generation_s=gen, rows=rows)
     os.makedirs(OUT, exist_ok=True)

@@ -1,6 +1,6 @@
 """What a substrate costs per step: half-space, layer, viscoelastic, viscoelastic layer.
 
-    python benchmarks/substrate_cost.py [--repeat 3]
+    python -m benchmarks.substrate_cost [--repeat 3]
 
 Issue "Substrates": the layer's matrix is built once per (mesh, H̄, ν) and a layered run should
 cost the same per step as a half-space run; a viscoelastic step within 1.5×. One scene (β = 100,
@@ -19,9 +19,7 @@ import os
 import sys
 import time
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-OUT = os.path.join(ROOT, "benchmarks", "out")
+from benchmarks._harness import OUT
 
 
 def main(argv=None):
@@ -60,7 +58,7 @@ def main(argv=None):
     lines = [
         f"# Cost per step by substrate ({describe()})",
         "",
-        f"`python benchmarks/substrate_cost.py --repeat {args.repeat}`: "
+        f"`python -m benchmarks.substrate_cost --repeat {args.repeat}`: "
         "`relax(100, 0.5, t_end=5)`, "
         f"Settings(error_estimate=False, contact_radius=None): {mesh.r.size} nodes for all; "
         "build = the influence matrix (0: cached from an earlier row), run = best of "

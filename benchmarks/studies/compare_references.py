@@ -1,6 +1,6 @@
 """The accuracy table's converged references against those of an earlier revision.
 
-    python benchmarks/compare_references.py [--rev c01ce10]
+    python -m benchmarks.compare_references [--rev c01ce10]
 
 benchmarks/accuracy.py caches its reference runs (``out/cache/ref_*.npz``, committed). When the
 discretisation changes, the references are recomputed; the earlier ones stay in git. Reading both
@@ -17,14 +17,11 @@ import io
 import os
 import re
 import subprocess
-import sys
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
-
-from benchmarks import accuracy  # noqa: E402
+from benchmarks import accuracy
+from benchmarks._harness import ROOT
 
 CACHE = "benchmarks/out/cache"
 

@@ -1,16 +1,14 @@
-"""Cheap checks of the benchmark methods (benchmarks/methods): the paper-scheme port reproduces
-docs/model.md's numbers, and the fully implicit Newton step agrees with lubjax's linearly implicit
-step on a small case."""
+"""Cheap checks of the benchmark methods: the paper-scheme port reproduces docs/model.md's numbers,
+and the fully implicit Newton step agrees with lubjax's linearly implicit step on a small case.
 
-import sys
-from pathlib import Path
+They check the benchmarks' own code, so they live beside it (pytest collects them with the
+library's tests: ``testpaths`` in pyproject.toml); the library's tests never import benchmarks.
+"""
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from benchmarks.methods import (  # noqa: E402
+from benchmarks.methods import (
     common,
     explicit_euler,
     lubjax_variant,

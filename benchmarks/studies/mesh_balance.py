@@ -1,9 +1,9 @@
 """Space against time at one tolerance: is the mesh that ``rtol`` gets balanced with the time
 steps it gets? Each run keeps the time tolerance ``rtol`` and takes the base mesh (Δr̄, growth,
-L̄; ``lubjax.Settings(rtol).mesh_parameters()``) of another tolerance, ``rtol × coarsening`` (below
-1: a finer mesh), so the steps stay (nearly) the same and only the mesh changes.
+L̄; ``lubjax.Settings(rtol=...).mesh_parameters()``) of another tolerance, ``rtol ×
+coarsening`` (below 1: a finer mesh), so the steps stay (nearly) the same and only the mesh changes.
 
-    python benchmarks/mesh_balance.py [--coarsening 0.1 0.3 1 3 10] [--rtols 1e-3 1e-4 1e-5]
+    python -m benchmarks.mesh_balance [--coarsening 0.1 0.3 1 3 10] [--rtols 1e-3 1e-4 1e-5]
                                       [--order 3]
 
 If the error hardly moves with the mesh, the time error dominates and the mesh rule
@@ -18,18 +18,17 @@ benchmarks/out/mesh_balance.md (mesh_balance_order3.md with ``--order 3``: BDF3'
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-import benchmarks.methods  # noqa: E402,F401  (pins threads before numpy/jax load)
+import benchmarks.methods  # noqa: F401  (pins threads before numpy/jax load)
 
 # isort: split
-import lubjax  # noqa: E402
-from benchmarks import machine  # noqa: E402
-from benchmarks import work_precision as wp  # noqa: E402
+import lubjax
+from benchmarks import machine
+from benchmarks import work_precision as wp
+from benchmarks._harness import OUT
 
 CASES = [(100.0, 0.5), (1e4, 0.5), (100.0, 2.0)]
 HORIZONS = (1.0, 5.0)
@@ -64,7 +63,7 @@ def main(argv=None):
                           f"{rtol * coarsening:g}: error {err:.2e}, {res.r.size} nodes, "
                           f"{run_s:.3f} s", file=sys.stderr, flush=True)
     mach = machine.describe()
-    command = ("python benchmarks/mesh_balance.py --coarsening "
+    command = ("python -m benchmarks.mesh_balance --coarsening "
                + " ".join(f"{c:g}" for c in args.coarsening)
                + " --rtols " + " ".join(f"{r:g}" for r in args.rtols)
                + (f" --order {args.order}" if args.order != 2 else ""))
@@ -82,7 +81,7 @@ def main(argv=None):
         lines.append(f"| {t_end:g} | {beta:g} | {z0:g} | {rtol:g} | {rtol * c:g} | {err:.2e} | "
                      f"{point:.2e} | {attempts} | {nodes} | {run_s:.3f} |")
     name = "mesh_balance.md" if args.order == 2 else f"mesh_balance_order{args.order}.md"
-    machine.write_report(Path(__file__).resolve().parent / "out" / name, lines)
+    machine.write_report(os.path.join(OUT, name), lines)
 
 
 if __name__ == "__main__":

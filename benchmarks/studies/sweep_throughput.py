@@ -1,6 +1,6 @@
 """Throughput of ``lubjax.sweep`` (cases per second) against batch size, compile time apart.
 
-    python benchmarks/sweep_throughput.py [--sizes 1 2 4 8 16 32] [--t-end 5]
+    python -m benchmarks.sweep_throughput [--sizes 1 2 4 8 16 32] [--t-end 5]
 
 The baseline is the largest batch's cases run one at a time through ``lubjax.relax`` (compiled
 once) in the same process, so the speed-up is a ratio measured in one run (smaller batches are
@@ -26,13 +26,11 @@ import jax
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-import lubjax  # noqa: E402
-
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from benchmarks.machine import cpu_model  # noqa: E402
+import lubjax
+from benchmarks.machine import cpu_model
 
 SETTINGS = lubjax.Settings(error_estimate=False, contact_radius=None)
 
