@@ -121,6 +121,9 @@ def main(argv=None):
     ap.add_argument("--dr", type=float, default=None, help="fine-zone mesh spacing of the runs")
     ap.add_argument("--contact-radius", default=None, choices=("auto",),
                     help="refine the checked runs at the contact edge (Settings.contact_radius)")
+    ap.add_argument("--film-error", default=None, choices=("relative", "flux"),
+                    help="what the checked runs measure the film's error against "
+                    "(Settings.film_error)")
     ap.add_argument("--betas", type=float, nargs="*", default=None)
     ap.add_argument("--z0s", type=float, nargs="*", default=None)
     ap.add_argument("--cached-only", action="store_true",
@@ -129,7 +132,8 @@ def main(argv=None):
     betas, z0s = ((10.0, 1000.0), (0.5, 1.11)) if args.quick else (BETAS, Z0S)
     betas = args.betas or betas
     z0s = args.z0s or z0s
-    given = dict(rtol=args.rtol, dr=args.dr, contact_radius=args.contact_radius)
+    given = dict(rtol=args.rtol, dr=args.dr, contact_radius=args.contact_radius,
+                 film_error=args.film_error)
     settings = lubjax.Settings(**{k: v for k, v in given.items() if v is not None})
     rows = []
     for beta in betas:

@@ -57,7 +57,7 @@ TAIL_TIGHTENING = 3.0
 @functools.partial(
     jax.tree_util.register_dataclass,
     data_fields=["rtol", "atol", "initial_step", "force_floor"],
-    meta_fields=["order", "max_steps"],
+    meta_fields=["order", "max_steps", "film_error"],
 )
 @dataclasses.dataclass(frozen=True)
 class Tolerance:
@@ -73,6 +73,8 @@ class Tolerance:
     order: 2 (BDF2), 1 (backward Euler throughout) or 3 (BDF3 from a segment's fourth step).
     max_steps: the attempt budget (accepted + rejected).
     force_floor: F̄ is held to rtol relative to max(|F̄|, force_floor × its peak so far).
+    film_error: "relative" or "flux", what the film's error is measured against
+        (:func:`film_scale`).
     """
 
     rtol: float = 1e-4
@@ -81,6 +83,7 @@ class Tolerance:
     order: int = 2
     max_steps: int = 20_000
     force_floor: float = 1e-8
+    film_error: str = "relative"
 
 
 DEFAULT_TOLERANCE = Tolerance()
@@ -186,7 +189,46 @@ def choose_order(controller: ControllerState, force, peaks: Peaks, max_order: in
     return order
 
 
-def error_ratio(estimate, level, previous, peaks: Peaks, tol: Tolerance, drive, gap_start):
+def film_scale(level, previous, disc, face_flux, rtol, elapsed, film_error: str):
+    """What the film's local error is measured against at each node (times rtol).
+
+    "relative": max(|h̄ⁿ⁺¹|, |h̄ⁿ|), the film's own size. "flux" (the default): the film's
+    error counts through what it does to the flux and, through the elastic contact, to the
+    force:
+
+    * a relative error ε of h̄_i changes the conductances beside node i by 3ε, so the flux Q_i
+      through them by 3ε Q_i. That matters against the flux the film inside r̄_i must pass:
+      Q_s = max(|v̄| r̄_i²/2, V_i/T), what a squeeze at the sphere's speed |v̄| drives through
+      r̄_i, or what would change the film volume V_i inside r̄_i by its own size over the run
+      so far, T = t̄ - t̄_start. The film's error may then be |h̄_i| Q_s/(3 Q_i). Where the film
+      carries its share of that flux (outside a contact, at small β, the neck through which a
+      hold drains: its pocket loses volume over times ~ t̄) this is no looser than the relative
+      control; inside a near-dry contact (β ≫ 1: a film that would drain over times ≫ the
+      run's) it is much looser;
+    * an absolute film error δ inside a contact of indentation δ_c changes the force (Hertz,
+      F ∝ δ_c^{3/2}) by 1.5 δ/δ_c of itself: the looser scale is capped at H = 2δ_c/3,
+      δ_c = max(-z̄, 0), so it is the relative control wherever the sphere is not indenting.
+
+    The scale never falls below the relative one.
+    """
+    relative = jnp.maximum(jnp.abs(level.film), jnp.abs(previous.film))
+    if film_error == "relative":
+        return relative
+    speed = jnp.maximum(jnp.abs(level.velocity), jnp.abs(previous.velocity))
+    volume = jnp.cumsum(disc.cell_area * jnp.abs(level.film))
+    carried = jnp.maximum(0.5 * speed * disc.r**2, volume / elapsed)
+    flux = jnp.abs(face_flux)
+    zero = jnp.zeros(1, flux.dtype)
+    node_flux = jnp.maximum(jnp.concatenate([flux, zero]), jnp.concatenate([zero, flux]))
+    tiny = jnp.finfo(flux.dtype).tiny
+    cap = jnp.minimum((2.0 / 3.0) * jnp.maximum(-level.gap, 0.0),
+                      jnp.abs(level.film) / jnp.sqrt(rtol))
+    loose = jnp.minimum(jnp.abs(level.film) * carried / (3.0 * node_flux + tiny), cap)
+    return jnp.maximum(relative, loose)
+
+
+def error_ratio(estimate, level, previous, peaks: Peaks, tol: Tolerance, drive, gap_start,
+                film_scale_=None):
     """ε = the largest of the scaled Milne estimates (≤ 1: within tolerance).
 
     ``estimate``: the step's error estimates (film at every node, force, gap, velocity);
@@ -216,7 +258,9 @@ def error_ratio(estimate, level, previous, peaks: Peaks, tol: Tolerance, drive, 
     * A free sphere's velocity is a state of its own ODE: held relative to the largest speed so
       far (it passes through zero at the turning point).
     """
-    scale_h = tol.atol + tol.rtol * jnp.maximum(jnp.abs(level.film), jnp.abs(previous.film))
+    if film_scale_ is None:
+        film_scale_ = jnp.maximum(jnp.abs(level.film), jnp.abs(previous.film))
+    scale_h = tol.atol + tol.rtol * film_scale_
     force, force_prev = level.force, previous.force
     magnitude = jnp.maximum(
         jnp.maximum(jnp.abs(force), jnp.abs(force_prev)), tol.force_floor * peaks.force

@@ -59,6 +59,12 @@ class Settings:
         force_floor: the force is held to rtol relative to max(|F̄|, force_floor × its peak
             so far): pointwise down to 1e-8 of the peak by default. Raise it where a tail far
             below the peak does not matter (fits of noisy data: fitting.FIT_SETTINGS uses 1e-5).
+        film_error: what the film's local error is measured against (see
+            :func:`lubjax._controller.film_scale`): "relative" (default), the film itself at
+            every node; "flux", the film where it carries the flux the force feels and, inside
+            a near-dry contact, a looser scale (at most √rtol of the film per step): 2-3× fewer
+            steps for β ≥ 10⁶ with a contact (docs/accuracy.md, near-dry contacts), the thin
+            films there less accurate (``Result.unresolved_film()`` says where).
         error_estimate: also run the nested coarse mesh (every other node) at rtol and at
             8·rtol, and return ``Result.force_error`` (about +55 % run time at the default).
         contact_radius: refine the mesh around this r̄ (the Hertz contact's edge, where a
@@ -92,6 +98,7 @@ class Settings:
     initial_step: float = 1e-5
     max_steps: int = 20_000
     force_floor: float = 1e-8
+    film_error: str = "relative"
     error_estimate: bool = True
     contact_radius: float | str | None = "auto"
     rim_refinement: float = 14.0
@@ -104,6 +111,7 @@ class Settings:
         if not 1e-10 <= self.rtol <= 0.1:
             raise ValueError(f"Settings.rtol must be in [1e-10, 0.1], got {self.rtol}")
         check_choice("Settings.order", self.order, (1, 2, 3))
+        check_choice("Settings.film_error", self.film_error, ("relative", "flux"))
         if not (isinstance(self.max_steps, int) and self.max_steps >= 10):
             raise ValueError(f"Settings.max_steps must be an integer >= 10, got {self.max_steps!r}")
         for name in ("dr", "length", "mesh_growth"):
@@ -149,7 +157,8 @@ class Settings:
 
     def tolerance(self) -> Tolerance:
         return Tolerance(
-            self.rtol, self.atol, self.initial_step, self.order, self.max_steps, self.force_floor
+            self.rtol, self.atol, self.initial_step, self.order, self.max_steps, self.force_floor,
+            self.film_error,
         )
 
 
