@@ -42,6 +42,7 @@ from lubjax._files import (
     save_figure,
 )
 
+from . import _afm
 from ._cache import enable_compilation_cache
 from ._checks import plausibility_flags
 from ._compare import compare_models
@@ -231,6 +232,26 @@ def build_parser() -> Parser:
                    "force N|mN|uN|nN (µ accepted); over a '# units:' line and the header's")
     p.add_argument("--force-sign", type=int, choices=(1, -1), default=1,
                    help="-1: the instrument records compression as negative force; flip it")
+    afm = p.add_argument_group(
+        "AFM and indenter vendor files (JPK .jpk-force/.jpk-force-map/.jpk-qi-*, Asylum .ibw, "
+        "Optics11 Chiaro .txt, afmformats .h5/.tab; pip install lubjax[afm])",
+        "the cantilever is the spring drive (k from the file), the height the stage; the "
+        "retract is left out by default: adhesion and cavitation are not modelled")
+    afm.add_argument("--radius", type=positive_float,
+                     help="tip (sphere) radius R [m], over the file's (required where the file "
+                     "gives none: JPK, Igor)")
+    afm.add_argument("--poisson", type=float, help="Poisson ratio of the sample (for E from E*)")
+    afm.add_argument("--segments", default="approach",
+                     help="segments fitted, comma-separated: approach (default), dwell (a "
+                     "constant-height or constant-force hold), retract, pause")
+    afm.add_argument("--baseline", choices=_afm.BASELINES, default="offset",
+                     help="force baseline removed before contact: offset (median, default; the "
+                     "fit still fits an offset) or tilt (a line in the travel)")
+    afm.add_argument("--curve", type=int, action="append",
+                     help="curve index of a force map (repeatable; default: every curve)")
+    afm.add_argument("--max-samples", type=positive_int, default=_afm.MAX_SAMPLES,
+                     help=f"decimate each curve to this many samples by block means (default "
+                     f"{_afm.MAX_SAMPLES})")
     p.add_argument("--fix", action="append", metavar="NAME=VALUE",
                    help="hold a parameter at a known value in SI units instead of fitting it, "
                    "e.g. --fix viscosity=1e-3 (names: E_star, viscosity, z0, stiffening, "
@@ -395,7 +416,7 @@ def _run(args) -> int:
     if args.units is not None:
         read_kw["units"] = parse_units(args.units, "--units")
     try:
-        traces = [read_trace(path, **read_kw) for path in args.traces]
+        traces = _read_all(args, read_kw)
         spec = ModelSpec(drive=_common_drive(traces, args.drive), **spec_kw)
         fixed = _fixed_option(args, spec, shared)
         for line in _start_warnings(traces, spec, fixed):
@@ -453,6 +474,30 @@ def _run(args) -> int:
         plot_fit(res, path)
         print(f"wrote {path}")
     return EXIT_OK if all(r.converged for r in results) else EXIT_FAILED
+
+
+def _read_all(args, read_kw):
+    """Every trace of the inputs: vendor files through afmformats (a force map gives one per
+    curve), delimited text through ``read_trace``."""
+    afm_opts = dict(radius=args.radius, poisson=args.poisson, baseline=args.baseline,
+                    max_samples=args.max_samples, curves=args.curve)
+    try:
+        afm_opts["segments"] = _afm.parse_segments(args.segments)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    traces, afm_used = [], False
+    for path in args.traces:
+        if _afm.is_afm_file(path):
+            afm_used = True
+            traces.extend(_afm.read_afm(path, **afm_opts))
+        else:
+            traces.append(read_trace(path, **read_kw))
+    if not afm_used:
+        given = [f"--{k.replace('_', '-')}" for k in ("radius", "poisson", "curve")
+                 if getattr(args, k) is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)}: only for AFM vendor files")
+    return traces
 
 
 def _common_drive(traces, drive):

@@ -1,0 +1,282 @@
+"""AFM and indenter vendor files as traces, read by ``afmformats`` (``pip install lubjax[afm]``).
+
+The instrument becomes the model's drive: the cantilever is a ``lubjax.Spring`` of the file's
+spring constant k, the stage is the recorded height (the piezo's travel; JPK's closed-loop
+"height (measured)", the Chiaro's piezo), the force is k times the deflection. Every segment
+goes through the same drive: the approach is the ramp, a constant-height dwell (JPK
+stress-relaxation) is relaxation through the spring, and a constant-force dwell (JPK
+creep-compliance) is the stage moving under the instrument's force feedback, which the spring
+drive takes as its measured input. The retract is excluded by default: adhesion (the tip
+sticking to the sample) and cavitation (the film tearing under tension) are not modelled.
+
+Conversion (afmformats gives SI: force N, height m, time s):
+
+* displacement = h(t_0) - h(t), positive toward the sample, since the first row kept;
+* force = the file's force (positive when the sample pushes back), less the baseline: the
+  median force before contact ("offset", the default; the fit still fits a constant offset) or
+  a straight line in the stage travel fitted to the samples before contact ("tilt", the drift
+  and interference AFM users remove);
+* the approach is cut to start a ``margin`` of the travel in contact before the contact
+  estimate (the first sample after which the force stays above ``CONTACT_FRACTION`` of its
+  peak above the baseline): the thin-film model needs travel ≪ R, and the far approach carries
+  no information on E* (the fitted z0 is the contact point, measured from the first kept row);
+* segments are decimated by block means to at most ``max_samples`` samples in all.
+
+Tip radius: the file's (the Chiaro header's "Tip radius (um)"; afmformats reads none from JPK
+or Igor files), else ``radius=`` (``--radius``) is required. Poisson ratio: ``poisson=``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+
+import numpy as np
+
+from ._io import MAX_TRAVEL_OVER_RADIUS, TraceError, make_trace
+
+#: File name endings read through afmformats (lower case).
+AFM_EXTENSIONS = (".jpk-force", ".jpk-force-map", ".jpk-qi-data", ".jpk-qi-series", ".ibw",
+                  ".h5", ".tab")
+#: Segment names per afmformats modality, in the file's segment order.
+SEGMENT_NAMES = {
+    "force-distance": ("approach", "retract"),
+    "creep-compliance": ("approach", "dwell", "retract"),
+    "stress-relaxation": ("pause", "approach", "dwell", "retract"),
+}
+BASELINES = ("offset", "tilt")
+#: The contact estimate: the force stays above this fraction of its peak over the baseline.
+CONTACT_FRACTION = 0.05
+#: The cut keeps this fraction of the in-contact travel before the contact estimate.
+MARGIN = 0.5
+MAX_SAMPLES = 600
+#: An approach-only trace is cut where the kept stage travel reaches this fraction of the
+#: model's limit MAX_TRAVEL_OVER_RADIUS·R (the cut is in the metadata: ``approach_cut_m``).
+CAP = 0.95
+
+
+def is_afm_file(path) -> bool:
+    """Whether ``path`` is a vendor file read through afmformats (by its extension; a ``.txt``
+    only when it is an Optics11 Chiaro export)."""
+    name = os.fspath(path).lower()
+    if name.endswith(AFM_EXTENSIONS):
+        return True
+    if name.endswith(".txt"):
+        try:
+            with open(path, "rb") as fh:
+                head = fh.read(4096)
+        except OSError:
+            return False
+        return b"Chiaro" in head or b"Optics11" in head
+    return False
+
+
+def _afmformats():
+    try:
+        import afmformats
+    except ImportError:
+        raise TraceError(
+            "reading AFM vendor files needs the afmformats package: pip install lubjax[afm]"
+        ) from None
+    return afmformats
+
+
+def parse_segments(spec) -> tuple[str, ...]:
+    """"approach,dwell" -> ("approach", "dwell"); ValueError naming the allowed names."""
+    allowed = ("pause", "approach", "dwell", "retract")
+    names = tuple(s.strip() for s in str(spec).split(",") if s.strip())
+    bad = [s for s in names if s not in allowed]
+    if bad or not names:
+        raise ValueError(f"--segments: unknown segment(s) {', '.join(bad) or repr(spec)} "
+                         f"(allowed: {', '.join(allowed)}, comma-separated)")
+    return names
+
+
+def _chiaro_radius(path) -> float | None:
+    """The Chiaro header's "Tip radius (um)" in metres (afmformats does not read it)."""
+    with open(path, "rb") as fh:
+        head = fh.read(8192).decode("latin-1")
+    m = re.search(r"Tip radius \(um\)\s+([0-9.eE+-]+)", head)
+    return float(m.group(1)) * 1e-6 if m else None
+
+
+def _vendor_e(path) -> dict:
+    """The vendor's own E where the file gives it (Chiaro: E[eff] = E*, E[v=...])."""
+    if not os.fspath(path).lower().endswith(".txt"):
+        return {}
+    with open(path, "rb") as fh:
+        head = fh.read(8192).decode("latin-1")
+    out = {}
+    m = re.search(r"E\[eff\] \(Pa\)\s+([0-9.eE+-]+)", head)
+    if m:
+        out["vendor_E_star_Pa"] = m.group(1)
+    m = re.search(r"Model:\s*(\S+)", head)
+    if m:
+        out["vendor_model"] = m.group(1)
+    return out
+
+
+def _block_mean(a: np.ndarray, n_out: int) -> np.ndarray:
+    """Means over n_out consecutive blocks (the last takes the remainder)."""
+    if a.size <= n_out:
+        return a
+    edges = np.linspace(0, a.size, n_out + 1).astype(int)
+    return np.add.reduceat(a, edges[:-1]) / np.diff(edges)
+
+
+def load_curves(path):
+    """The afmformats curves of a file (a list; a force map gives one per point)."""
+    afmformats = _afmformats()
+    try:
+        return list(afmformats.load_data(os.fspath(path)))
+    except Exception as exc:  # afmformats raises its own error types and plain ones
+        raise TraceError(f"{path}: afmformats cannot read it: {type(exc).__name__}: {exc}"
+                         ) from None
+
+
+def curve_arrays(curve, name: str = "curve") -> dict:
+    """SI arrays of one afmformats curve: time, height (the stage), force, segment names."""
+    md = curve.metadata
+    modality = md.get("imaging mode", "force-distance")
+    names = SEGMENT_NAMES.get(modality)
+    if names is None:
+        raise TraceError(f"{name}: imaging mode {modality!r} is not supported (supported: "
+                         f"{', '.join(SEGMENT_NAMES)})")
+    cols = curve.columns
+    chiaro = md.get("instrument") == "Chiaro"
+    hcol = "height (piezo)" if chiaro or "height (measured)" not in cols else "height (measured)"
+    if hcol not in cols:
+        raise TraceError(f"{name}: no height column (has {', '.join(cols)})")
+    force = np.asarray(curve["force"], dtype=np.float64)
+    height = np.asarray(curve[hcol], dtype=np.float64)
+    seg = np.asarray(curve["segment"], dtype=int)
+    if "time" in cols:
+        time = np.asarray(curve["time"], dtype=np.float64)
+    else:
+        rate = md.get("rate approach")
+        if not rate:
+            raise TraceError(f"{name}: the file has no time column and no sampling rate")
+        time = np.arange(force.size) / float(rate)
+    k = md.get("spring constant")
+    if not (k and math.isfinite(float(k)) and float(k) > 0):
+        raise TraceError(f"{name}: the file gives no cantilever spring constant")
+    labels = np.array([names[i] if i < len(names) else f"segment{i}" for i in seg])
+    return dict(time=time, height=height, force=force, segment=labels, stiffness=float(k),
+                modality=modality, height_column=hcol)
+
+
+def _contact_index(d: np.ndarray, f: np.ndarray) -> int:
+    """First sample after which the force stays above CONTACT_FRACTION of its peak."""
+    above = f > CONTACT_FRACTION * float(np.max(f))
+    below = np.flatnonzero(~above[: int(np.argmax(f)) + 1])
+    return int(below[-1]) + 1 if below.size else 0
+
+
+def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
+                   baseline: str = "offset", max_samples: int = MAX_SAMPLES, name: str = "curve",
+                   extra_metadata=None):
+    """One afmformats curve as a :class:`fitting.Trace` for the spring drive (see module doc)."""
+    if baseline not in BASELINES:
+        raise ValueError(f"baseline must be one of {', '.join(BASELINES)}, got {baseline!r}")
+    if not (isinstance(max_samples, int) and max_samples >= 20):
+        raise ValueError(f"max_samples must be an integer >= 20, got {max_samples!r}")
+    a = curve_arrays(curve, name)
+    r = radius
+    where = "--radius"
+    if r is None:
+        path = curve.metadata.get("path")
+        r = _chiaro_radius(path) if path and str(path).lower().endswith(".txt") else None
+        where = "the file's tip radius"
+    if r is None:
+        raise TraceError(f"{name}: the file gives no tip radius: pass --radius R (metres)")
+    present = [s for s in dict.fromkeys(a["segment"])]
+    missing = [s for s in segments if s not in present]
+    if missing:
+        raise TraceError(f"{name}: no {', '.join(missing)} segment in this {a['modality']} "
+                         f"curve (it has {', '.join(present)})")
+    order = [s for s in present if s in segments]
+    if "approach" not in order:
+        raise TraceError(f"{name}: the segments must include the approach (the ramp)")
+    keep = np.isin(a["segment"], order)
+    t, h, f, lab = a["time"][keep], a["height"][keep], a["force"][keep], a["segment"][keep]
+    d = h[0] - h
+    appr = np.flatnonzero(lab == "approach")
+    if d[appr[-1]] - d[appr[0]] <= 0:
+        raise TraceError(f"{name}: the height does not fall over the approach (column "
+                         f"{a['height_column']}): not an approach toward the sample")
+    fa = f[appr] - float(np.median(f[appr][: max(3, appr.size // 10)]))
+    ic = appr[0] + _contact_index(d[appr], fa)
+    d_contact = float(d[ic])
+    d_in = float(d[appr[-1]]) - d_contact
+    cap = CAP * MAX_TRAVEL_OVER_RADIUS * r / (1 + MARGIN)
+    cut = None
+    if d_in > cap and order == ["approach"]:
+        # Only the start of a deep approach is within the thin-film model's travel ≪ R.
+        d_in = cap
+        last = appr[0] + int(np.searchsorted(d[appr], d_contact + d_in, side="right"))
+        cut = float(d[last - 1])
+        t, d, f, lab = t[:last], d[:last], f[:last], lab[:last]
+        appr = appr[appr < last]
+    start = int(np.searchsorted(d[appr], d_contact - MARGIN * d_in))
+    start = appr[0] + min(start, ic - appr[0])
+    pre = slice(appr[0], start)
+    n_pre = start - appr[0]
+    if baseline == "tilt":
+        if n_pre < 10:
+            raise TraceError(f"{name}: baseline 'tilt' needs the approach before the cut "
+                             f"(>= 10 samples), has {n_pre}")
+        slope, icpt = np.polyfit(d[pre], f[pre], 1)
+        base = slope * d + icpt
+    else:
+        ref = f[pre] if n_pre >= 3 else f[appr[0]: appr[0] + max(3, appr.size // 10)]
+        base = np.full_like(f, float(np.median(ref)))
+    f = f - base
+    sel = np.arange(start, t.size)
+    d_first = float(d[start])
+    contact = d_contact - d_first
+    t, d, f, lab = t[sel], d[sel] - d[start], f[sel], lab[sel]
+    # block means per segment, the segments' shares of the samples in proportion to their count
+    parts = []
+    for s in order:
+        idx = np.flatnonzero(lab == s)
+        n_out = max(10, int(round(max_samples * idx.size / lab.size)))
+        parts.append([_block_mean(x[idx], n_out) for x in (t, d, f)])
+    t, d, f = (np.concatenate([p[i] for p in parts]) for i in range(3))
+    reach = float(np.max(np.abs(d)))
+    if reach > MAX_TRAVEL_OVER_RADIUS * r:
+        raise TraceError(
+            f"{name}: the stage travel kept ({reach:.3g} m: the indentation, the cantilever's "
+            f"bending F/k and the margin before contact) is {reach / r:.3g} R with R = {r:.3g} m "
+            f"({where}); the thin-film model needs travel <= {MAX_TRAVEL_OVER_RADIUS:g} R. "
+            "A deeper indentation is beyond it (a sharper tip: a larger R is not a fix)")
+    meta = {
+        "drive": "spring", "stiffness_N_m": repr(a["stiffness"]), "instrument_file": str(name),
+        "modality": a["modality"], "segments": ",".join(order), "baseline": baseline,
+        "stage_column": a["height_column"], "contact_estimate_m": repr(contact),
+    }
+    if cut is not None:
+        meta["approach_cut_m"] = repr(cut - float(d_first))
+    if poisson is not None:
+        meta["poisson_ratio"] = repr(float(poisson))
+    meta.update(extra_metadata or {})
+    return make_trace(t - t[0], d, f, r, meta, name)
+
+
+def read_afm(path, *, radius=None, poisson=None, segments=("approach",), baseline="offset",
+             max_samples: int = MAX_SAMPLES, curves=None):
+    """Traces (a list: a force map gives one per curve) of a vendor file; ``curves``: indices
+    of the curves to keep (default all)."""
+    all_curves = load_curves(path)
+    pick = range(len(all_curves)) if curves is None else curves
+    out = []
+    extra = _vendor_e(path)
+    for i in pick:
+        if not 0 <= i < len(all_curves):
+            raise TraceError(f"{path}: curve {i} does not exist (the file has "
+                             f"{len(all_curves)} curve(s), 0 to {len(all_curves) - 1})")
+        name = os.fspath(path) if len(all_curves) == 1 else f"{os.fspath(path)}#{i}"
+        out.append(curve_to_trace(all_curves[i], radius=radius, poisson=poisson,
+                                  segments=segments, baseline=baseline, max_samples=max_samples,
+                                  name=name, extra_metadata=extra))
+    return out
