@@ -130,7 +130,9 @@ def load_curves(path):
     afmformats = _afmformats()
     try:
         return list(afmformats.load_data(os.fspath(path)))
-    except Exception as exc:  # afmformats raises its own error types and plain ones
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except BaseException as exc:  # afmformats' MissingMetaDataError is a BaseException
         raise TraceError(f"{path}: afmformats cannot read it: {type(exc).__name__}: {exc}"
                          ) from None
 
@@ -202,11 +204,27 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
     t, h, f, lab = a["time"][keep], a["height"][keep], a["force"][keep], a["segment"][keep]
     d = h[0] - h
     appr = np.flatnonzero(lab == "approach")
+    # A file that records the way back in its approach segment (Igor): the approach ends at
+    # the turning point.
+    turn = appr[0] + int(np.argmax(d[appr]))
+    if turn < appr[-1]:
+        keep_rows = (np.arange(t.size) <= turn) | (lab != "approach")
+        t, d, f, lab = t[keep_rows], d[keep_rows], f[keep_rows], lab[keep_rows]
+        appr = np.flatnonzero(lab == "approach")
     if d[appr[-1]] - d[appr[0]] <= 0:
         raise TraceError(f"{name}: the height does not fall over the approach (column "
                          f"{a['height_column']}): not an approach toward the sample")
-    fa = f[appr] - float(np.median(f[appr][: max(3, appr.size // 10)]))
-    ic = appr[0] + _contact_index(d[appr], fa)
+    base = np.full_like(f, float(np.median(f[appr][: max(3, appr.size // 10)])))
+    ic = appr[0] + _contact_index(d[appr], f[appr] - base[appr])
+    if baseline == "tilt":
+        # a line in the travel through the samples well before contact, then contact again
+        pre = appr[d[appr] < d[ic] - MARGIN * (d[appr[-1]] - d[ic])]
+        if pre.size < 10:
+            raise TraceError(f"{name}: baseline 'tilt' needs the approach before contact "
+                             f"(>= 10 samples well before it), has {pre.size}")
+        slope, icpt = np.polyfit(d[pre], f[pre], 1)
+        base = slope * d + icpt
+        ic = appr[0] + _contact_index(d[appr], f[appr] - base[appr])
     d_contact = float(d[ic])
     d_in = float(d[appr[-1]]) - d_contact
     cap = CAP * MAX_TRAVEL_OVER_RADIUS * r / (1 + MARGIN)
@@ -216,21 +234,12 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
         d_in = cap
         last = appr[0] + int(np.searchsorted(d[appr], d_contact + d_in, side="right"))
         cut = float(d[last - 1])
-        t, d, f, lab = t[:last], d[:last], f[:last], lab[:last]
+        t, d, f, lab, base = t[:last], d[:last], f[:last], lab[:last], base[:last]
         appr = appr[appr < last]
     start = int(np.searchsorted(d[appr], d_contact - MARGIN * d_in))
     start = appr[0] + min(start, ic - appr[0])
-    pre = slice(appr[0], start)
-    n_pre = start - appr[0]
-    if baseline == "tilt":
-        if n_pre < 10:
-            raise TraceError(f"{name}: baseline 'tilt' needs the approach before the cut "
-                             f"(>= 10 samples), has {n_pre}")
-        slope, icpt = np.polyfit(d[pre], f[pre], 1)
-        base = slope * d + icpt
-    else:
-        ref = f[pre] if n_pre >= 3 else f[appr[0]: appr[0] + max(3, appr.size // 10)]
-        base = np.full_like(f, float(np.median(ref)))
+    if baseline == "offset" and start - appr[0] >= 3:
+        base = np.full_like(f, float(np.median(f[appr[0]:start])))
     f = f - base
     sel = np.arange(start, t.size)
     d_first = float(d[start])
@@ -243,6 +252,7 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
         n_out = max(10, int(round(max_samples * idx.size / lab.size)))
         parts.append([_block_mean(x[idx], n_out) for x in (t, d, f)])
     t, d, f = (np.concatenate([p[i] for p in parts]) for i in range(3))
+    d = d - d[0]  # the first block's mean: travel since the first row kept
     reach = float(np.max(np.abs(d)))
     if reach > MAX_TRAVEL_OVER_RADIUS * r:
         raise TraceError(
