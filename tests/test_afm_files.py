@@ -223,3 +223,11 @@ def test_zebrafish_curve_fits_end_to_end(data_dir, tmp_path, capsys):
         Path(os.environ["LUBJAX_KEEP_FIGURES"]).mkdir(parents=True, exist_ok=True)
         (Path(os.environ["LUBJAX_KEEP_FIGURES"]) / "afm_zebrafish_fit.png").write_bytes(
             png.read_bytes())
+
+
+def test_afm_options_on_a_plain_trace_are_a_usage_error(capsys):
+    rc = main(["data/paper_dc140.csv", "--radius", "1e-3", "--quiet"])
+    assert rc == 2
+    assert "--radius: only for AFM vendor files" in capsys.readouterr().err
+    rc = main(["data/paper_dc140.csv", "--segments", "approach,hold", "--quiet"])
+    assert rc == 2 and "unknown segment(s) hold" in capsys.readouterr().err
