@@ -6,8 +6,11 @@ spring constant k, the stage is the recorded height (the piezo's travel; JPK's c
 goes through the same drive: the approach is the ramp, a constant-height dwell (JPK
 stress-relaxation) is relaxation through the spring, and a constant-force dwell (JPK
 creep-compliance) is the stage moving under the instrument's force feedback, which the spring
-drive takes as its measured input. The retract is excluded by default: adhesion (the tip
-sticking to the sample) and cavitation (the film tearing under tension) are not modelled.
+drive takes as its measured input. Or, with ``drive="force"``, a constant-force dwell is creep
+under load control (``lubjax.Load``): the input is the force from rest (the last sample within
+the baseline's noise before contact), the response the tip's own travel (stage less F/k). The
+retract is excluded by default: adhesion (the tip sticking to the sample) and cavitation (the
+film tearing under tension) are not modelled.
 
 Conversion (afmformats gives SI: force N, height m, time s):
 
@@ -46,6 +49,8 @@ SEGMENT_NAMES = {
     "stress-relaxation": ("pause", "approach", "dwell", "retract"),
 }
 BASELINES = ("offset", "tilt")
+#: The drives a vendor curve is read for: the cantilever as a spring, or load control.
+DRIVES = ("spring", "force")
 #: The contact estimate: the force stays above this fraction of its peak over the baseline.
 CONTACT_FRACTION = 0.05
 #: The cut keeps this fraction of the in-contact travel before the contact estimate.
@@ -177,8 +182,12 @@ def _contact_index(d: np.ndarray, f: np.ndarray) -> int:
 
 def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
                    baseline: str = "offset", max_samples: int = MAX_SAMPLES, name: str = "curve",
-                   extra_metadata=None):
-    """One afmformats curve as a :class:`fitting.Trace` for the spring drive (see module doc)."""
+                   extra_metadata=None, drive: str = "spring"):
+    """One afmformats curve as a :class:`fitting.Trace` (see the module docstring): for the
+    spring drive (default), or for load control (``drive="force"``, a constant-force dwell as
+    creep: the input is the force, the response the tip's approach)."""
+    if drive not in DRIVES:
+        raise ValueError(f"drive must be one of {', '.join(DRIVES)}, got {drive!r}")
     if baseline not in BASELINES:
         raise ValueError(f"baseline must be one of {', '.join(BASELINES)}, got {baseline!r}")
     if not (isinstance(max_samples, int) and max_samples >= 20):
@@ -200,6 +209,9 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
     order = [s for s in present if s in segments]
     if "approach" not in order:
         raise TraceError(f"{name}: the segments must include the approach (the ramp)")
+    if drive == "force" and order != ["approach", "dwell"]:
+        raise TraceError(f"{name}: load control (drive force) fits the approach and a "
+                         "constant-force dwell: --segments approach,dwell")
     keep = np.isin(a["segment"], order)
     t, h, f, lab = a["time"][keep], a["height"][keep], a["force"][keep], a["segment"][keep]
     d = h[0] - h
@@ -241,6 +253,16 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
     if baseline == "offset" and start - appr[0] >= 3:
         base = np.full_like(f, float(np.median(f[appr[0]:start])))
     f = f - base
+    if drive == "force":
+        # Load control starts at rest under no load: from the last sample before the contact
+        # estimate within the baseline's noise (3σ, at least 1 % of the peak); the response is
+        # the tip's own travel.
+        pre = f[appr[0]:start]
+        noise = 1.4826 * np.median(np.abs(np.diff(pre))) / math.sqrt(2) if pre.size > 3 else 0.0
+        level = max(3 * noise, 0.01 * float(np.max(f[appr])))
+        low = np.flatnonzero(f[appr[0]:ic + 1] <= level)
+        start = appr[0] + int(low[-1]) if low.size else ic
+        d = d - f / a["stiffness"]
     sel = np.arange(start, t.size)
     d_first = float(d[start])
     contact = d_contact - d_first
@@ -254,14 +276,16 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
     t, d, f = (np.concatenate([p[i] for p in parts]) for i in range(3))
     d = d - d[0]  # the first block's mean: travel since the first row kept
     reach = float(np.max(np.abs(d)))
+    what = ("the stage travel kept ({:.3g} m: the indentation, the cantilever's bending F/k "
+            "and the margin before contact)" if drive == "spring" else
+            "the tip's travel from contact ({:.3g} m)").format(reach)
     if reach > MAX_TRAVEL_OVER_RADIUS * r:
         raise TraceError(
-            f"{name}: the stage travel kept ({reach:.3g} m: the indentation, the cantilever's "
-            f"bending F/k and the margin before contact) is {reach / r:.3g} R with R = {r:.3g} m "
+            f"{name}: {what} is {reach / r:.3g} R with R = {r:.3g} m "
             f"({where}); the thin-film model needs travel <= {MAX_TRAVEL_OVER_RADIUS:g} R. "
             "A deeper indentation is beyond it (a sharper tip: a larger R is not a fix)")
     meta = {
-        "drive": "spring", "stiffness_N_m": repr(a["stiffness"]), "instrument_file": str(name),
+        "drive": drive, "stiffness_N_m": repr(a["stiffness"]), "instrument_file": str(name),
         "modality": a["modality"], "segments": ",".join(order), "baseline": baseline,
         "stage_column": a["height_column"], "contact_estimate_m": repr(contact),
     }
@@ -274,7 +298,7 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
 
 
 def read_afm(path, *, radius=None, poisson=None, segments=("approach",), baseline="offset",
-             max_samples: int = MAX_SAMPLES, curves=None):
+             max_samples: int = MAX_SAMPLES, curves=None, drive: str = "spring"):
     """Traces (a list: a force map gives one per curve) of a vendor file; ``curves``: indices
     of the curves to keep (default all)."""
     all_curves = load_curves(path)
@@ -288,5 +312,5 @@ def read_afm(path, *, radius=None, poisson=None, segments=("approach",), baselin
         name = os.fspath(path) if len(all_curves) == 1 else f"{os.fspath(path)}#{i}"
         out.append(curve_to_trace(all_curves[i], radius=radius, poisson=poisson,
                                   segments=segments, baseline=baseline, max_samples=max_samples,
-                                  name=name, extra_metadata=extra))
+                                  name=name, extra_metadata=extra, drive=drive))
     return out

@@ -120,7 +120,12 @@ def plot_fit(res: FitResult, path: str) -> None:
     import matplotlib.pyplot as plt
 
     force = res.spec.response == "force"
-    scale, unit = (1e3, "mN") if force else (1e6, "μm")
+    # the unit in which the peak reads between 1 and 1000 (mN and μm for a tribometer, nN for
+    # an AFM cantilever)
+    peak = float(np.max(np.abs(res.data))) or 1.0
+    units = (("N", 1.0), ("mN", 1e3), ("μN", 1e6), ("nN", 1e9)) if force else (
+        ("m", 1.0), ("mm", 1e3), ("μm", 1e6), ("nm", 1e9))
+    unit, scale = next(((u, s) for u, s in units if peak * s >= 1.0), units[-1])
     label = "force" if force else "approach"
     fig = plt.figure(figsize=(13, 8))
     gs = fig.add_gridspec(3, 2, width_ratios=[1.55, 1], height_ratios=[3, 1.3, 1.2],
@@ -243,7 +248,8 @@ def build_parser() -> Parser:
     afm.add_argument("--poisson", type=float, help="Poisson ratio of the sample (for E from E*)")
     afm.add_argument("--segments", default="approach",
                      help="segments fitted, comma-separated: approach (default), dwell (a "
-                     "constant-height or constant-force hold), retract, pause")
+                     "constant-height or constant-force hold), retract, pause; with --drive "
+                     "force: approach,dwell of a constant-force dwell, fitted as creep")
     afm.add_argument("--baseline", choices=_afm.BASELINES, default="offset",
                      help="force baseline removed before contact: offset (median, default; the "
                      "fit still fits an offset) or tilt (a line in the travel)")
@@ -480,7 +486,8 @@ def _read_all(args, read_kw):
     """Every trace of the inputs: vendor files through afmformats (a force map gives one per
     curve), delimited text through ``read_trace``."""
     afm_opts = dict(radius=args.radius, poisson=args.poisson, baseline=args.baseline,
-                    max_samples=args.max_samples, curves=args.curve)
+                    max_samples=args.max_samples, curves=args.curve,
+                    drive=args.drive if args.drive is not None else "spring")
     try:
         afm_opts["segments"] = _afm.parse_segments(args.segments)
     except ValueError as exc:
@@ -489,6 +496,9 @@ def _read_all(args, read_kw):
     for path in args.traces:
         if _afm.is_afm_file(path):
             afm_used = True
+            if afm_opts["drive"] not in _afm.DRIVES:
+                raise UsageError(f"--drive {args.drive}: an AFM file is read for the drives "
+                                 f"{', '.join(_afm.DRIVES)} (the cantilever is a spring)")
             traces.extend(_afm.read_afm(path, **afm_opts))
         else:
             traces.append(read_trace(path, **read_kw))

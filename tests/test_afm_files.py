@@ -158,6 +158,37 @@ def test_creep_compliance_dwell_holds_the_force(data_dir, name):
     _check_trace(tr, afmformats.load_data(path)[0].metadata["spring constant"])
 
 
+def test_creep_compliance_as_load_control(data_dir):
+    """``drive="force"``: the input is the held force (from rest: the first sample within the
+    baseline's noise before contact), the response the tip's own travel, stage less F/k."""
+    path = _vendor(data_dir, "fmt-jpk-cc_pr14-polymergel-2021.06.30.jpk-force")
+    (curve,) = afmformats.load_data(path)
+    (tr,) = _afm.read_afm(path, radius=20e-6, segments=("approach", "dwell"), drive="force",
+                          max_samples=300)
+    (spring,) = _afm.read_afm(path, radius=20e-6, segments=("approach", "dwell"),
+                              max_samples=300)
+    assert float(tr.metadata["stiffness_N_m"]) == curve.metadata["spring constant"]
+    assert tr.metadata["drive"] == "force"
+    peak = float(np.max(tr.force))
+    assert tr.force[0] < 0.05 * peak  # starts from (nearly) no load
+    dwell = tr.time > tr.time[-1] - 2.9
+    assert np.std(tr.force[dwell]) < 0.02 * peak
+    # the tip's travel over the dwell equals the stage's: the force, so the bending, is held
+    creep_tip = tr.displacement[dwell][-1] - tr.displacement[dwell][0]
+    creep_stage = spring.displacement[dwell][-1] - spring.displacement[dwell][0]
+    assert creep_tip == pytest.approx(creep_stage, rel=0.05)
+    # over the same time (both end with the dwell) the tip lags the stage by the bending ΔF/k
+    t0 = spring.time[-1] - tr.time[-1]
+    stage = spring.displacement[-1] - np.interp(t0, spring.time, spring.displacement)
+    lag = stage - (tr.displacement[-1] - tr.displacement[0])
+    k = curve.metadata["spring constant"]
+    assert lag == pytest.approx((tr.force[-1] - tr.force[0]) / k, rel=0.1)
+    with pytest.raises(TraceError, match="--segments approach,dwell"):
+        _afm.read_afm(path, radius=20e-6, drive="force")
+    with pytest.raises(ValueError, match="drive must be one of spring, force"):
+        _afm.read_afm(path, radius=20e-6, drive="travel")
+
+
 def test_deep_dwell_beyond_the_thin_film_model_is_refused(data_dir):
     path = _vendor(data_dir, "fmt-jpk-sr_cell1-0008.jpk-force")
     with pytest.raises(TraceError, match=r"needs travel <= 0.2 R"):
@@ -231,3 +262,22 @@ def test_afm_options_on_a_plain_trace_are_a_usage_error(capsys):
     assert "--radius: only for AFM vendor files" in capsys.readouterr().err
     rc = main(["data/paper_dc140.csv", "--segments", "approach,hold", "--quiet"])
     assert rc == 2 and "unknown segment(s) hold" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_polymer_gel_creep_fits_as_a_viscoelastic_solid(data_dir, tmp_path, capsys):
+    """``--drive force --segments approach,dwell --substrate viscoelastic`` on the JPK
+    creep-compliance curve of the polymer gel: converged, a creeping solid (E0/E∞ > 1, τ within
+    the 3 s dwell) whose relaxed E* is that of a soft gel, with tight errors."""
+    out = tmp_path / "creep.json"
+    path = _vendor(data_dir, "fmt-jpk-cc_pr14-polymergel-2021.06.30.jpk-force")
+    rc = main([str(path), "--radius", "10e-6", "--drive", "force", "--segments",
+               "approach,dwell", "--substrate", "viscoelastic", "--max-samples", "300",
+               "--rtol", "1e-3", "--out", str(out), "--quiet", "--no-cache"])
+    assert rc == 0, capsys.readouterr()
+    res = json.loads(out.read_text())
+    assert res["converged"] and res["model"]["drive"] == "force"
+    assert 100.0 < res["E_star_Pa"] < 1e4
+    assert res["stderr"]["E_star_Pa"] < 0.1 * res["E_star_Pa"]
+    assert 1.0 < res["stiffening"] < 5.0
+    assert 0.01 < res["relaxation_time_s"] < 3.0
