@@ -44,7 +44,7 @@ from lubjax._files import (
 
 from . import _afm
 from ._cache import enable_compilation_cache
-from ._checks import plausibility_flags
+from ._checks import e_star_range, plausibility_flags
 from ._compare import compare_models
 from ._fit import METHODS, FitResult, fit_traces, initial_guess
 from ._io import parse_columns, parse_units, read_trace
@@ -376,7 +376,7 @@ def _start_warnings(traces, spec: ModelSpec, fixed: dict) -> list[str]:
         scales = scales_from_trace(tr, spec.drive)  # also refuses a force negative in compression
         values = {n: v for n, v in initial_guess(tr, scales, spec).values.items()
                   if n not in fixed}
-        for flag in plausibility_flags(values, scales.speed):
+        for flag in plausibility_flags(values, scales.speed, e_star_range(tr.metadata)):
             out.append(f"{os.path.basename(tr.name)}: before fitting, from the data: {flag}")
     return out
 
@@ -423,6 +423,10 @@ def _run(args) -> int:
         read_kw["units"] = parse_units(args.units, "--units")
     try:
         traces = _read_all(args, read_kw)
+        if plots and len(plots) != len(traces):  # a force map: one plot per curve
+            plots = plot_paths(args.plot, [_curve_label(tr.name) for tr in traces])
+            outputs = [o for o in outputs if o[0] != "--plot"] + [("--plot", p) for p in plots]
+            check_outputs(outputs, inputs=args.traces, input_label="input trace")
         spec = ModelSpec(drive=_common_drive(traces, args.drive), **spec_kw)
         fixed = _fixed_option(args, spec, shared)
         for line in _start_warnings(traces, spec, fixed):
@@ -480,6 +484,15 @@ def _run(args) -> int:
         plot_fit(res, path)
         print(f"wrote {path}")
     return EXIT_OK if all(r.converged for r in results) else EXIT_FAILED
+
+
+def _curve_label(name: str) -> str:
+    """"map.jpk-force-map#3" -> "map_curve3.jpk-force-map" (plot_paths keeps the stem)."""
+    path, sep, index = name.rpartition("#")
+    if not sep:
+        return name
+    root, ext = os.path.splitext(path)
+    return f"{root}_curve{index}{ext}"
 
 
 def _read_all(args, read_kw):

@@ -249,11 +249,25 @@ def test_zebrafish_curve_fits_end_to_end(data_dir, tmp_path, capsys):
     assert 0 < res["z0_m"] < float(res["metadata"]["approach_cut_m"])
     assert res["E_Pa"] == pytest.approx(0.75 * e_star)
     assert math.isfinite(res["beta"])
+    assert res["plausible"] and not any("soft lubricated" in f for f in res["flags"])
     assert png.stat().st_size > 10_000
     if os.environ.get("LUBJAX_KEEP_FIGURES"):
         Path(os.environ["LUBJAX_KEEP_FIGURES"]).mkdir(parents=True, exist_ok=True)
         (Path(os.environ["LUBJAX_KEEP_FIGURES"]) / "afm_zebrafish_fit.png").write_bytes(
             png.read_bytes())
+
+
+def test_force_map_gives_one_trace_and_one_plot_name_per_curve(data_dir):
+    import fitting._cli as cli
+
+    path = _vendor(data_dir, "fmt-jpk-fd_map2x2_extracted.jpk-force-map")
+    args = cli.build_parser().parse_args([str(path), "--radius", "10e-6", "--plot", "fit.png"])
+    traces = cli._read_all(args, {})
+    assert [t.name for t in traces] == [f"{path}#{i}" for i in range(4)]
+    plots = cli.plot_paths("fit.png", [cli._curve_label(t.name) for t in traces])
+    assert plots == [f"fit_{path.name.split('.')[0]}_curve{i}.png" for i in range(4)]
+    args = cli.build_parser().parse_args([str(path), "--radius", "10e-6", "--curve", "2"])
+    assert [t.name for t in cli._read_all(args, {})] == [f"{path}#2"]
 
 
 def test_afm_options_on_a_plain_trace_are_a_usage_error(capsys):
