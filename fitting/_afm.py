@@ -299,8 +299,21 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
 
 def read_afm(path, *, radius=None, poisson=None, segments=("approach",), baseline="offset",
              max_samples: int = MAX_SAMPLES, curves=None, drive: str = "spring"):
-    """Traces (a list: a force map gives one per curve) of a vendor file; ``curves``: indices
-    of the curves to keep (default all)."""
+    """The traces of an AFM or indenter vendor file, read through afmformats (a list: a force
+    map gives one per curve), SI, ready for :func:`fit_traces` (see the module docstring).
+
+    Args:
+        path: a JPK ``.jpk-force``/``.jpk-force-map``/``.jpk-qi-*``, Igor ``.ibw``, afmformats
+            ``.h5``/``.tab`` or Optics11 Chiaro ``.txt`` file.
+        radius: tip radius R [m]; None takes the file's (Chiaro), else a TraceError.
+        poisson: the sample's Poisson ratio (kept in the metadata: E = E*(1 - ν²) in reports).
+        segments: "pause", "approach", "dwell", "retract"; the approach is required.
+        baseline: "offset" (median force before contact) or "tilt" (a line in the travel).
+        max_samples: samples per curve after block means (≥ 20).
+        curves: indices of the curves to keep (default all).
+        drive: "spring" (the cantilever; default) or "force" (load control of a
+            constant-force dwell: segments approach and dwell).
+    """
     all_curves = load_curves(path)
     pick = range(len(all_curves)) if curves is None else curves
     out = []
