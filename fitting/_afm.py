@@ -9,8 +9,8 @@ creep-compliance) is the stage moving under the instrument's force feedback, whi
 drive takes as its measured input. Or, with ``drive="force"``, a constant-force dwell is creep
 under load control (``lubjax.Load``): the input is the force from rest (the last sample within
 the baseline's noise before contact), the response the tip's own travel (stage less F/k). The
-retract is excluded by default: adhesion (the tip sticking to the sample) and cavitation (the
-film tearing under tension) are not modelled.
+retract is refused: adhesion (the tip sticking to the sample) and cavitation (the film tearing
+under tension) are not modelled.
 
 Conversion (afmformats gives SI: force N, height m, time s):
 
@@ -206,6 +206,10 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
     if missing:
         raise TraceError(f"{name}: no {', '.join(missing)} segment in this {a['modality']} "
                          f"curve (it has {', '.join(present)})")
+    if "retract" in segments:
+        raise TraceError(f"{name}: the retract is not fitted: adhesion (the tip sticking to the "
+                         "sample) and cavitation (the film tearing under tension) are not "
+                         "modelled; fit the approach (and dwell)")
     order = [s for s in present if s in segments]
     if "approach" not in order:
         raise TraceError(f"{name}: the segments must include the approach (the ramp)")

@@ -241,15 +241,16 @@ def build_parser() -> Parser:
         "AFM and indenter vendor files (JPK .jpk-force/.jpk-force-map/.jpk-qi-*, Asylum .ibw, "
         "Optics11 Chiaro .txt, afmformats .h5/.tab; pip install lubjax[afm])",
         "the cantilever is the spring drive (k from the file), the height the stage; the "
-        "retract is left out by default: adhesion and cavitation are not modelled")
+        "retract is not fitted: adhesion and cavitation are not modelled")
     afm.add_argument("--radius", type=positive_float,
                      help="tip (sphere) radius R [m], over the file's (required where the file "
                      "gives none: JPK, Igor)")
     afm.add_argument("--poisson", type=float, help="Poisson ratio of the sample (for E from E*)")
     afm.add_argument("--segments", default="approach",
                      help="segments fitted, comma-separated: approach (default), dwell (a "
-                     "constant-height or constant-force hold), retract, pause; with --drive "
-                     "force: approach,dwell of a constant-force dwell, fitted as creep")
+                     "constant-height or constant-force hold); with --drive force: "
+                     "approach,dwell of a constant-force dwell, fitted as creep. The retract "
+                     "is refused (adhesion, cavitation: not modelled)")
     afm.add_argument("--baseline", choices=_afm.BASELINES, default="offset",
                      help="force baseline removed before contact: offset (median, default; the "
                      "fit still fits an offset) or tilt (a line in the travel)")

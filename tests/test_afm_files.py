@@ -201,6 +201,8 @@ def test_bad_input_is_named(data_dir, monkeypatch):
         _afm.read_afm(zf)
     with pytest.raises(TraceError, match="no dwell segment.*has approach, retract"):
         _afm.read_afm(zf, radius=ZEBRAFISH_R, segments=("approach", "dwell"))
+    with pytest.raises(TraceError, match="retract is not fitted: adhesion.*cavitation"):
+        _afm.read_afm(zf, radius=ZEBRAFISH_R, segments=("approach", "retract"))
     with pytest.raises(ValueError, match="unknown segment.*allowed: pause, approach"):
         _afm.parse_segments("approach,hold")
     with pytest.raises(TraceError, match="curve 7 does not exist.*4 curve"):
