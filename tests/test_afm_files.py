@@ -14,6 +14,7 @@ import os
 import subprocess
 import sys
 import tarfile
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -36,28 +37,36 @@ def _cache_dir() -> Path:
 
 @pytest.fixture(scope="module")
 def data_dir() -> Path:
-    """The instrument files of the pinned sdists, extracted once (skip without the index)."""
+    """The instrument files of the pinned sdists, extracted once (skip without the index).
+
+    Each sdist is downloaded and extracted into a private folder, then renamed into place:
+    test workers running at once (pytest -n) never see half a folder."""
     root = _cache_dir()
-    done = root / "extracted.ok"
-    if not done.exists():
-        root.mkdir(parents=True, exist_ok=True)
-        for name, version in SDISTS.items():
-            archive = root / f"{name}-{version}.tar.gz"
-            if not archive.exists():
-                cmd = [sys.executable, "-m", "pip", "download", "-q", "--no-deps",
-                       "--no-binary", ":all:", "-d", str(root), f"{name}=={version}"]
-                run = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-                if run.returncode != 0 or not archive.exists():
-                    pytest.skip(f"the package index is not reachable (pip download {name}=="
-                                f"{version} failed): {run.stderr.strip()[-200:]}")
+    root.mkdir(parents=True, exist_ok=True)
+    for name, version in SDISTS.items():
+        final = root / f"{name}-{version}"
+        if final.is_dir():
+            continue
+        with tempfile.TemporaryDirectory(dir=root) as tmp:
+            cmd = [sys.executable, "-m", "pip", "download", "-q", "--no-deps", "--no-binary",
+                   ":all:", "-d", tmp, f"{name}=={version}"]
+            run = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+            archive = Path(tmp) / f"{name}-{version}.tar.gz"
+            if run.returncode != 0 or not archive.exists():
+                pytest.skip(f"the package index is not reachable (pip download {name}=="
+                            f"{version} failed): {run.stderr.strip()[-200:]}")
             with tarfile.open(archive) as tar:
                 members = [m for m in tar.getmembers() if m.isfile() and (
                     "/tests/data/" in m.name or "/examples/data/" in m.name)]
-                tar.extractall(root, members=members, filter="data")
-        chiaro = root / f"afmformats-{SDISTS['afmformats']}/tests/data"
-        with zipfile.ZipFile(chiaro / "fmt-chiaro-txt_AEBP1_Indentation_002.zip") as z:
-            z.extractall(chiaro)
-        done.write_text("ok\n")
+                tar.extractall(tmp, members=members, filter="data")
+            for zipped in (Path(tmp) / final.name).glob("tests/data/fmt-chiaro-*.zip"):
+                with zipfile.ZipFile(zipped) as z:
+                    z.extractall(zipped.parent)
+            try:
+                os.rename(Path(tmp) / final.name, final)
+            except OSError:  # another worker was first
+                if not final.is_dir():
+                    raise
     return root
 
 
