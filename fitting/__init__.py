@@ -3,7 +3,8 @@
 Public API (see the module docstrings for the maths):
 
 * :func:`read_trace`, :func:`parse_trace`, :func:`write_trace`, :func:`make_trace`, :class:`Trace`
-  — the CSV format of ``data/README.md``;
+  — the CSV format of ``data/README.md``; :func:`read_afm` — AFM and indenter vendor files
+  (``pip install lubjax[afm]``);
 * :class:`ModelSpec` — what is fitted: the drive (prescribed travel, a spring, force control),
   the substrate (half-space or layer, elastic or viscoelastic) and the offset;
 * :func:`fit_traces` (separate, joint with ``shared=``, batched), :func:`fit_trace`,
@@ -16,6 +17,7 @@ Public API (see the module docstrings for the maths):
 
 import lubjax  # noqa: F401  (enables float64 in JAX)
 
+from ._afm import read_afm
 from ._cli import plot_fit, summary_line, write_table
 from ._compare import compare_models
 from ._coverage import coverage, noise_draws
@@ -60,6 +62,7 @@ __all__ = [
     "parse_trace",
     "plot_fit",
     "predict",
+    "read_afm",
     "read_trace",
     "residuals",
     "residuals_and_jacobian",

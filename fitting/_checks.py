@@ -6,8 +6,8 @@ contact the model is for, so a value outside them points to a unit slip, and the
 likely one with its fix:
 
 * E* in [1 kPa, 1 GPa]: from the softest hydrogels to stiff rubbers and polymers; glass and metals
-  (tens of GPa) are not soft contacts. E* ∝ force, so E* far above means the force is in mN
-  (μN, nN) rather than N.
+  (tens of GPa) are not soft contacts (from 1 Pa for AFM files: cells and tissue). E* ∝ force,
+  so E* far above means the force is in mN (μN, nN) rather than N.
 * η in [1e-4, 1e4] Pa s: from below water (1e-3) to 10x a 10⁶ cSt silicone oil (~1e3); the
   stiffest silicone gums (~2e4) are flagged too, the price of catching a time in ms on a
   100 Pa s oil (η = 1e5). η ∝ force × time: η high with E* high is the force's unit, η high
@@ -22,6 +22,9 @@ from __future__ import annotations
 import math
 
 E_STAR_RANGE_PA = (1e3, 1e9)
+#: For AFM and indenter vendor files (fitting._afm; SI from the instrument, no unit to slip):
+#: cells and tissue go down to ~10 Pa.
+AFM_E_STAR_RANGE_PA = (1.0, 1e9)
 VISCOSITY_RANGE_PA_S = (1e-4, 1e4)
 SPEED_RANGE_M_S = (1e-9, 1.0)
 _PREFIX = {"force": ("N", "mN", "uN", "nN"), "time": ("s", "ms", "us", "ns")}
@@ -57,15 +60,23 @@ def _unit_fix(what: str, k: int) -> str:
             f"{units[0]})? check --units and the header")
 
 
-def plausibility_flags(values: dict, speed: float | None = None) -> list[str]:
+def e_star_range(metadata) -> tuple[float, float]:
+    """The plausible E* of a trace: ``AFM_E_STAR_RANGE_PA`` for a vendor file read by
+    fitting._afm (its metadata has ``instrument_file``), else ``E_STAR_RANGE_PA``."""
+    return AFM_E_STAR_RANGE_PA if "instrument_file" in (metadata or {}) else E_STAR_RANGE_PA
+
+
+def plausibility_flags(values: dict, speed: float | None = None,
+                       e_range: tuple[float, float] = E_STAR_RANGE_PA) -> list[str]:
     """Messages for values outside soft lubricated contact (empty when all are inside).
 
     Args:
         values: parameter values in SI (``E_star`` [Pa], ``viscosity`` [Pa s]; others ignored).
         speed: the ramp speed d_c/t_c [m/s] (``Scales.speed``), or None.
+        e_range: the plausible E* [Pa] (:func:`e_star_range` of the trace's metadata).
     """
     flags = []
-    lo, hi = E_STAR_RANGE_PA
+    lo, hi = e_range
     kE = _slip(values.get("E_star", math.nan), lo, hi)
     if kE:
         E = values["E_star"]

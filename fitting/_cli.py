@@ -42,8 +42,9 @@ from lubjax._files import (
     save_figure,
 )
 
+from . import _afm
 from ._cache import enable_compilation_cache
-from ._checks import plausibility_flags
+from ._checks import e_star_range, plausibility_flags
 from ._compare import compare_models
 from ._fit import METHODS, FitResult, fit_traces, initial_guess
 from ._io import parse_columns, parse_units, read_trace
@@ -119,7 +120,12 @@ def plot_fit(res: FitResult, path: str) -> None:
     import matplotlib.pyplot as plt
 
     force = res.spec.response == "force"
-    scale, unit = (1e3, "mN") if force else (1e6, "μm")
+    # the unit in which the peak reads between 1 and 1000 (mN and μm for a tribometer, nN for
+    # an AFM cantilever)
+    peak = float(np.max(np.abs(res.data))) or 1.0
+    units = (("N", 1.0), ("mN", 1e3), ("μN", 1e6), ("nN", 1e9)) if force else (
+        ("m", 1.0), ("mm", 1e3), ("μm", 1e6), ("nm", 1e9))
+    unit, scale = next(((u, s) for u, s in units if peak * s >= 1.0), units[-1])
     label = "force" if force else "approach"
     fig = plt.figure(figsize=(13, 8))
     gs = fig.add_gridspec(3, 2, width_ratios=[1.55, 1], height_ratios=[3, 1.3, 1.2],
@@ -231,6 +237,28 @@ def build_parser() -> Parser:
                    "force N|mN|uN|nN (µ accepted); over a '# units:' line and the header's")
     p.add_argument("--force-sign", type=int, choices=(1, -1), default=1,
                    help="-1: the instrument records compression as negative force; flip it")
+    afm = p.add_argument_group(
+        "AFM and indenter vendor files (JPK .jpk-force/.jpk-force-map/.jpk-qi-*, Asylum .ibw, "
+        "Optics11 Chiaro .txt, afmformats .h5/.tab; pip install lubjax[afm])",
+        "the cantilever is the spring drive (k from the file), the height the stage; the "
+        "retract is not fitted: adhesion and cavitation are not modelled")
+    afm.add_argument("--radius", type=positive_float,
+                     help="tip (sphere) radius R [m], over the file's (required where the file "
+                     "gives none: JPK, Igor)")
+    afm.add_argument("--poisson", type=float, help="Poisson ratio of the sample (for E from E*)")
+    afm.add_argument("--segments", default="approach",
+                     help="segments fitted, comma-separated: approach (default), dwell (a "
+                     "constant-height or constant-force hold); with --drive force: "
+                     "approach,dwell of a constant-force dwell, fitted as creep. The retract "
+                     "is refused (adhesion, cavitation: not modelled)")
+    afm.add_argument("--baseline", choices=_afm.BASELINES, default="offset",
+                     help="force baseline removed before contact: offset (median, default; the "
+                     "fit still fits an offset) or tilt (a line in the travel)")
+    afm.add_argument("--curve", type=int, action="append",
+                     help="curve index of a force map (repeatable; default: every curve)")
+    afm.add_argument("--max-samples", type=positive_int, default=_afm.MAX_SAMPLES,
+                     help=f"decimate each curve to this many samples by block means (default "
+                     f"{_afm.MAX_SAMPLES})")
     p.add_argument("--fix", action="append", metavar="NAME=VALUE",
                    help="hold a parameter at a known value in SI units instead of fitting it, "
                    "e.g. --fix viscosity=1e-3 (names: E_star, viscosity, z0, stiffening, "
@@ -349,7 +377,7 @@ def _start_warnings(traces, spec: ModelSpec, fixed: dict) -> list[str]:
         scales = scales_from_trace(tr, spec.drive)  # also refuses a force negative in compression
         values = {n: v for n, v in initial_guess(tr, scales, spec).values.items()
                   if n not in fixed}
-        for flag in plausibility_flags(values, scales.speed):
+        for flag in plausibility_flags(values, scales.speed, e_star_range(tr.metadata)):
             out.append(f"{os.path.basename(tr.name)}: before fitting, from the data: {flag}")
     return out
 
@@ -395,7 +423,11 @@ def _run(args) -> int:
     if args.units is not None:
         read_kw["units"] = parse_units(args.units, "--units")
     try:
-        traces = [read_trace(path, **read_kw) for path in args.traces]
+        traces = _read_all(args, read_kw)
+        if plots and len(plots) != len(traces):  # a force map: one plot per curve
+            plots = plot_paths(args.plot, [_curve_label(tr.name) for tr in traces])
+            outputs = [o for o in outputs if o[0] != "--plot"] + [("--plot", p) for p in plots]
+            check_outputs(outputs, inputs=args.traces, input_label="input trace")
         spec = ModelSpec(drive=_common_drive(traces, args.drive), **spec_kw)
         fixed = _fixed_option(args, spec, shared)
         for line in _start_warnings(traces, spec, fixed):
@@ -453,6 +485,43 @@ def _run(args) -> int:
         plot_fit(res, path)
         print(f"wrote {path}")
     return EXIT_OK if all(r.converged for r in results) else EXIT_FAILED
+
+
+def _curve_label(name: str) -> str:
+    """"map.jpk-force-map#3" -> "map_curve3.jpk-force-map" (plot_paths keeps the stem)."""
+    path, sep, index = name.rpartition("#")
+    if not sep:
+        return name
+    root, ext = os.path.splitext(path)
+    return f"{root}_curve{index}{ext}"
+
+
+def _read_all(args, read_kw):
+    """Every trace of the inputs: vendor files through afmformats (a force map gives one per
+    curve), delimited text through ``read_trace``."""
+    afm_opts = dict(radius=args.radius, poisson=args.poisson, baseline=args.baseline,
+                    max_samples=args.max_samples, curves=args.curve,
+                    drive=args.drive if args.drive is not None else "spring")
+    try:
+        afm_opts["segments"] = _afm.parse_segments(args.segments)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    traces, afm_used = [], False
+    for path in args.traces:
+        if _afm.is_afm_file(path):
+            afm_used = True
+            if afm_opts["drive"] not in _afm.DRIVES:
+                raise UsageError(f"--drive {args.drive}: an AFM file is read for the drives "
+                                 f"{', '.join(_afm.DRIVES)} (the cantilever is a spring)")
+            traces.extend(_afm.read_afm(path, **afm_opts))
+        else:
+            traces.append(read_trace(path, **read_kw))
+    if not afm_used:
+        given = [f"--{k.replace('_', '-')}" for k in ("radius", "poisson", "curve")
+                 if getattr(args, k) is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)}: only for AFM vendor files")
+    return traces
 
 
 def _common_drive(traces, drive):

@@ -864,7 +864,8 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
         flags.append("fit did not converge: treat the values and errors as unreliable")
     flags += summary["flags"]
     flags += _checks.plausibility_flags(
-        {n: v for n, v in values.items() if n not in fixed}, scales.speed)
+        {n: v for n, v in values.items() if n not in fixed}, scales.speed,
+        _checks.e_star_range(trace.metadata))
     return FitResult(
         name=trace.name, spec=spec, values=values, stderr=stderr, correlation=corr,
         shared=tuple(s for s in shared if len(members) > 1),

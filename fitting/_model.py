@@ -241,8 +241,10 @@ def scales_from_trace(trace: Trace, drive: str | None = None) -> Scales:
     tc = u_end / rate
     settled = np.flatnonzero(np.abs(u - u_end) > 1e-3 * u_end)
     end = float(t[min(settled[-1] + 1, n - 1)]) if settled.size else float(t[k])
-    if end >= t[-1]:
+    if end >= t[-1] and drive == "force":
         raise ValueError(f"{trace.name}: column {ucol}: the input never settles into a hold")
+    # Position control may end on its ramp (an AFM approach): the motion ends with the record.
+    end = min(end, float(t[-1]))
     if drive == "force":
         indent = float(np.median(y[-tail:]))
         if not indent > 0:

@@ -9,7 +9,7 @@ import numpy as np
 
 import lubjax
 
-from ._checks import plausibility_flags
+from ._checks import e_star_range, plausibility_flags
 from ._fit import FitResult
 
 #: (JSON key, display unit, display scale) of each parameter; the offset's depends on the channel.
@@ -98,7 +98,8 @@ def result_to_dict(res: FitResult) -> dict:
         flags=list(res.flags),
         fixed=list(res.fixed or ()),
         plausible=not plausibility_flags(
-            {n: v for n, v in res.values.items() if n not in (res.fixed or ())}, res.scales.speed),
+            {n: v for n, v in res.values.items() if n not in (res.fixed or ())}, res.scales.speed,
+            e_star_range(res.metadata)),
         start={**{units(res, n)[0]: res.start.values[n] for n in names},
                "notes": list(res.start.notes)},
         metadata=dict(res.metadata),

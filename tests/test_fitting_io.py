@@ -106,6 +106,19 @@ def test_no_motion_is_an_error():
         scales_from_trace(tr)
 
 
+def test_position_control_may_end_on_its_ramp_load_control_may_not():
+    """An AFM approach ends at its deepest point (no hold): the motion ends with the record.
+    Load control still needs the hold (the creep start takes the final approach from it)."""
+    t = np.linspace(0.0, 1.0, 101)
+    d = np.where(t < 0.2, 0.0, 1e-6 * (t - 0.2))
+    f = 1e-2 * np.clip(d - 4e-7, 0.0, None) ** 1.5
+    sc = scales_from_trace(make_trace(t, d, f, 1e-4))
+    assert sc.t_on == pytest.approx(0.2)
+    assert sc.t_end_motion == pytest.approx((t[-1] - sc.t_on) / sc.time_scale)
+    with pytest.raises(ValueError, match="never settles into a hold"):
+        scales_from_trace(make_trace(t, d, 1e-9 + d, 1e-4, {"drive": "force"}))
+
+
 def test_bundled_traces_are_valid_and_small():
     files = sorted(
         glob.glob(os.path.join(DATA, "*.csv")) + glob.glob(os.path.join(DATA, "clean", "*.csv"))

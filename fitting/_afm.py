@@ -1,0 +1,333 @@
+"""AFM and indenter vendor files as traces, read by ``afmformats`` (``pip install lubjax[afm]``).
+
+The instrument becomes the model's drive: the cantilever is a ``lubjax.Spring`` of the file's
+spring constant k, the stage is the recorded height (the piezo's travel; JPK's closed-loop
+"height (measured)", the Chiaro's piezo), the force is k times the deflection. Every segment
+goes through the same drive: the approach is the ramp, a constant-height dwell (JPK
+stress-relaxation) is relaxation through the spring, and a constant-force dwell (JPK
+creep-compliance) is the stage moving under the instrument's force feedback, which the spring
+drive takes as its measured input. Or, with ``drive="force"``, a constant-force dwell is creep
+under load control (``lubjax.Load``): the input is the force from rest (the last sample within
+the baseline's noise before contact), the response the tip's own travel (stage less F/k). The
+retract is refused: adhesion (the tip sticking to the sample) and cavitation (the film tearing
+under tension) are not modelled.
+
+Conversion (afmformats gives SI: force N, height m, time s):
+
+* displacement = h(t_0) - h(t), positive toward the sample, since the first row kept;
+* force = the file's force (positive when the sample pushes back), less the baseline: the
+  median force before contact ("offset", the default; the fit still fits a constant offset) or
+  a straight line in the stage travel fitted to the samples before contact ("tilt", the drift
+  and interference AFM users remove);
+* the approach is cut to start a ``margin`` of the travel in contact before the contact
+  estimate (the first sample after which the force stays above ``CONTACT_FRACTION`` of its
+  peak above the baseline): the thin-film model needs travel ≪ R, and the far approach carries
+  no information on E* (the fitted z0 is the contact point, measured from the first kept row);
+* segments are decimated by block means to at most ``max_samples`` samples in all.
+
+Tip radius: the file's (the Chiaro header's "Tip radius (um)"; afmformats reads none from JPK
+or Igor files), else ``radius=`` (``--radius``) is required. Poisson ratio: ``poisson=``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+
+import numpy as np
+
+from ._io import MAX_TRAVEL_OVER_RADIUS, TraceError, make_trace
+
+#: File name endings read through afmformats (lower case).
+AFM_EXTENSIONS = (".jpk-force", ".jpk-force-map", ".jpk-qi-data", ".jpk-qi-series", ".ibw",
+                  ".h5", ".tab")
+#: Segment names per afmformats modality, in the file's segment order.
+SEGMENT_NAMES = {
+    "force-distance": ("approach", "retract"),
+    "creep-compliance": ("approach", "dwell", "retract"),
+    "stress-relaxation": ("pause", "approach", "dwell", "retract"),
+}
+BASELINES = ("offset", "tilt")
+#: The drives a vendor curve is read for: the cantilever as a spring, or load control.
+DRIVES = ("spring", "force")
+#: The contact estimate: the force stays above this fraction of its peak over the baseline.
+CONTACT_FRACTION = 0.05
+#: The cut keeps this fraction of the in-contact travel before the contact estimate.
+MARGIN = 0.5
+MAX_SAMPLES = 600
+#: An approach-only trace is cut where the kept stage travel reaches this fraction of the
+#: model's limit MAX_TRAVEL_OVER_RADIUS·R (the cut is in the metadata: ``approach_cut_m``).
+CAP = 0.95
+
+
+def is_afm_file(path) -> bool:
+    """Whether ``path`` is a vendor file read through afmformats (by its extension; a ``.txt``
+    only when it is an Optics11 Chiaro export)."""
+    name = os.fspath(path).lower()
+    if name.endswith(AFM_EXTENSIONS):
+        return True
+    if name.endswith(".txt"):
+        try:
+            with open(path, "rb") as fh:
+                head = fh.read(4096)
+        except OSError:
+            return False
+        return b"Chiaro" in head or b"Optics11" in head
+    return False
+
+
+def _afmformats():
+    try:
+        import afmformats
+    except ImportError:
+        raise TraceError(
+            "reading AFM vendor files needs the afmformats package: pip install lubjax[afm]"
+        ) from None
+    return afmformats
+
+
+def parse_segments(spec) -> tuple[str, ...]:
+    """"approach,dwell" -> ("approach", "dwell"); ValueError naming the allowed names."""
+    allowed = ("pause", "approach", "dwell", "retract")
+    names = tuple(s.strip() for s in str(spec).split(",") if s.strip())
+    bad = [s for s in names if s not in allowed]
+    if bad or not names:
+        raise ValueError(f"--segments: unknown segment(s) {', '.join(bad) or repr(spec)} "
+                         f"(allowed: {', '.join(allowed)}, comma-separated)")
+    return names
+
+
+def _chiaro_radius(path) -> float | None:
+    """The Chiaro header's "Tip radius (um)" in metres (afmformats does not read it)."""
+    with open(path, "rb") as fh:
+        head = fh.read(8192).decode("latin-1")
+    m = re.search(r"Tip radius \(um\)\s+([0-9.eE+-]+)", head)
+    return float(m.group(1)) * 1e-6 if m else None
+
+
+def _vendor_e(path) -> dict:
+    """The vendor's own E where the file gives it (Chiaro: E[eff] = E*, E[v=...])."""
+    if not os.fspath(path).lower().endswith(".txt"):
+        return {}
+    with open(path, "rb") as fh:
+        head = fh.read(8192).decode("latin-1")
+    out = {}
+    m = re.search(r"E\[eff\] \(Pa\)\s+([0-9.eE+-]+)", head)
+    if m:
+        out["vendor_E_star_Pa"] = m.group(1)
+    m = re.search(r"Model:\s*(\S+)", head)
+    if m:
+        out["vendor_model"] = m.group(1)
+    return out
+
+
+def _block_mean(a: np.ndarray, n_out: int) -> np.ndarray:
+    """Means over n_out consecutive blocks (the last takes the remainder)."""
+    if a.size <= n_out:
+        return a
+    edges = np.linspace(0, a.size, n_out + 1).astype(int)
+    return np.add.reduceat(a, edges[:-1]) / np.diff(edges)
+
+
+def load_curves(path):
+    """The afmformats curves of a file (a list; a force map gives one per point)."""
+    afmformats = _afmformats()
+    try:
+        return list(afmformats.load_data(os.fspath(path)))
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except BaseException as exc:  # afmformats' MissingMetaDataError is a BaseException
+        raise TraceError(f"{path}: afmformats cannot read it: {type(exc).__name__}: {exc}"
+                         ) from None
+
+
+def curve_arrays(curve, name: str = "curve") -> dict:
+    """SI arrays of one afmformats curve: time, height (the stage), force, segment names."""
+    md = curve.metadata
+    modality = md.get("imaging mode", "force-distance")
+    names = SEGMENT_NAMES.get(modality)
+    if names is None:
+        raise TraceError(f"{name}: imaging mode {modality!r} is not supported (supported: "
+                         f"{', '.join(SEGMENT_NAMES)})")
+    cols = curve.columns
+    chiaro = md.get("instrument") == "Chiaro"
+    hcol = "height (piezo)" if chiaro or "height (measured)" not in cols else "height (measured)"
+    if hcol not in cols:
+        raise TraceError(f"{name}: no height column (has {', '.join(cols)})")
+    force = np.asarray(curve["force"], dtype=np.float64)
+    height = np.asarray(curve[hcol], dtype=np.float64)
+    seg = np.asarray(curve["segment"], dtype=int)
+    if "time" in cols:
+        time = np.asarray(curve["time"], dtype=np.float64)
+    else:
+        rate = md.get("rate approach")
+        if not rate:
+            raise TraceError(f"{name}: the file has no time column and no sampling rate")
+        time = np.arange(force.size) / float(rate)
+    k = md.get("spring constant")
+    if not (k and math.isfinite(float(k)) and float(k) > 0):
+        raise TraceError(f"{name}: the file gives no cantilever spring constant")
+    labels = np.array([names[i] if i < len(names) else f"segment{i}" for i in seg])
+    return dict(time=time, height=height, force=force, segment=labels, stiffness=float(k),
+                modality=modality, height_column=hcol)
+
+
+def _contact_index(d: np.ndarray, f: np.ndarray) -> int:
+    """First sample after which the force stays above CONTACT_FRACTION of its peak."""
+    above = f > CONTACT_FRACTION * float(np.max(f))
+    below = np.flatnonzero(~above[: int(np.argmax(f)) + 1])
+    return int(below[-1]) + 1 if below.size else 0
+
+
+def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
+                   baseline: str = "offset", max_samples: int = MAX_SAMPLES, name: str = "curve",
+                   extra_metadata=None, drive: str = "spring"):
+    """One afmformats curve as a :class:`fitting.Trace` (see the module docstring): for the
+    spring drive (default), or for load control (``drive="force"``, a constant-force dwell as
+    creep: the input is the force, the response the tip's approach)."""
+    if drive not in DRIVES:
+        raise ValueError(f"drive must be one of {', '.join(DRIVES)}, got {drive!r}")
+    if baseline not in BASELINES:
+        raise ValueError(f"baseline must be one of {', '.join(BASELINES)}, got {baseline!r}")
+    if not (isinstance(max_samples, int) and max_samples >= 20):
+        raise ValueError(f"max_samples must be an integer >= 20, got {max_samples!r}")
+    a = curve_arrays(curve, name)
+    r = radius
+    where = "--radius"
+    if r is None:
+        path = curve.metadata.get("path")
+        r = _chiaro_radius(path) if path and str(path).lower().endswith(".txt") else None
+        where = "the file's tip radius"
+    if r is None:
+        raise TraceError(f"{name}: the file gives no tip radius: pass --radius R (metres)")
+    present = [s for s in dict.fromkeys(a["segment"])]
+    missing = [s for s in segments if s not in present]
+    if missing:
+        raise TraceError(f"{name}: no {', '.join(missing)} segment in this {a['modality']} "
+                         f"curve (it has {', '.join(present)})")
+    if "retract" in segments:
+        raise TraceError(f"{name}: the retract is not fitted: adhesion (the tip sticking to the "
+                         "sample) and cavitation (the film tearing under tension) are not "
+                         "modelled; fit the approach (and dwell)")
+    order = [s for s in present if s in segments]
+    if "approach" not in order:
+        raise TraceError(f"{name}: the segments must include the approach (the ramp)")
+    if drive == "force" and order != ["approach", "dwell"]:
+        raise TraceError(f"{name}: load control (drive force) fits the approach and a "
+                         "constant-force dwell: --segments approach,dwell")
+    keep = np.isin(a["segment"], order)
+    t, h, f, lab = a["time"][keep], a["height"][keep], a["force"][keep], a["segment"][keep]
+    d = h[0] - h
+    appr = np.flatnonzero(lab == "approach")
+    # A file that records the way back in its approach segment (Igor): the approach ends at
+    # the turning point.
+    turn = appr[0] + int(np.argmax(d[appr]))
+    if turn < appr[-1]:
+        keep_rows = (np.arange(t.size) <= turn) | (lab != "approach")
+        t, d, f, lab = t[keep_rows], d[keep_rows], f[keep_rows], lab[keep_rows]
+        appr = np.flatnonzero(lab == "approach")
+    if d[appr[-1]] - d[appr[0]] <= 0:
+        raise TraceError(f"{name}: the height does not fall over the approach (column "
+                         f"{a['height_column']}): not an approach toward the sample")
+    base = np.full_like(f, float(np.median(f[appr][: max(3, appr.size // 10)])))
+    ic = appr[0] + _contact_index(d[appr], f[appr] - base[appr])
+    if baseline == "tilt":
+        # a line in the travel through the samples well before contact, then contact again
+        pre = appr[d[appr] < d[ic] - MARGIN * (d[appr[-1]] - d[ic])]
+        if pre.size < 10:
+            raise TraceError(f"{name}: baseline 'tilt' needs the approach before contact "
+                             f"(>= 10 samples well before it), has {pre.size}")
+        slope, icpt = np.polyfit(d[pre], f[pre], 1)
+        base = slope * d + icpt
+        ic = appr[0] + _contact_index(d[appr], f[appr] - base[appr])
+    d_contact = float(d[ic])
+    d_in = float(d[appr[-1]]) - d_contact
+    cap = CAP * MAX_TRAVEL_OVER_RADIUS * r / (1 + MARGIN)
+    cut = None
+    if d_in > cap and order == ["approach"]:
+        # Only the start of a deep approach is within the thin-film model's travel ≪ R.
+        d_in = cap
+        last = appr[0] + int(np.searchsorted(d[appr], d_contact + d_in, side="right"))
+        cut = float(d[last - 1])
+        t, d, f, lab, base = t[:last], d[:last], f[:last], lab[:last], base[:last]
+        appr = appr[appr < last]
+    start = int(np.searchsorted(d[appr], d_contact - MARGIN * d_in))
+    start = appr[0] + min(start, ic - appr[0])
+    if baseline == "offset" and start - appr[0] >= 3:
+        base = np.full_like(f, float(np.median(f[appr[0]:start])))
+    f = f - base
+    if drive == "force":
+        # Load control starts at rest under no load: from the last sample before the contact
+        # estimate within the baseline's noise (3σ, at least 1 % of the peak); the response is
+        # the tip's own travel.
+        pre = f[appr[0]:start]
+        noise = 1.4826 * np.median(np.abs(np.diff(pre))) / math.sqrt(2) if pre.size > 3 else 0.0
+        level = max(3 * noise, 0.01 * float(np.max(f[appr])))
+        low = np.flatnonzero(f[appr[0]:ic + 1] <= level)
+        start = appr[0] + int(low[-1]) if low.size else ic
+        d = d - f / a["stiffness"]
+    sel = np.arange(start, t.size)
+    d_first = float(d[start])
+    contact = d_contact - d_first
+    t, d, f, lab = t[sel], d[sel] - d[start], f[sel], lab[sel]
+    # block means per segment, the segments' shares of the samples in proportion to their count
+    parts = []
+    for s in order:
+        idx = np.flatnonzero(lab == s)
+        n_out = max(10, int(round(max_samples * idx.size / lab.size)))
+        parts.append([_block_mean(x[idx], n_out) for x in (t, d, f)])
+    t, d, f = (np.concatenate([p[i] for p in parts]) for i in range(3))
+    d = d - d[0]  # the first block's mean: travel since the first row kept
+    reach = float(np.max(np.abs(d)))
+    what = ("the stage travel kept ({:.3g} m: the indentation, the cantilever's bending F/k "
+            "and the margin before contact)" if drive == "spring" else
+            "the tip's travel from contact ({:.3g} m)").format(reach)
+    if reach > MAX_TRAVEL_OVER_RADIUS * r:
+        raise TraceError(
+            f"{name}: {what} is {reach / r:.3g} R with R = {r:.3g} m "
+            f"({where}); the thin-film model needs travel <= {MAX_TRAVEL_OVER_RADIUS:g} R. "
+            "A deeper indentation is beyond it (a sharper tip: a larger R is not a fix)")
+    meta = {
+        "drive": drive, "stiffness_N_m": repr(a["stiffness"]), "instrument_file": str(name),
+        "modality": a["modality"], "segments": ",".join(order), "baseline": baseline,
+        "stage_column": a["height_column"], "contact_estimate_m": repr(contact),
+    }
+    if cut is not None:
+        meta["approach_cut_m"] = repr(cut - float(d_first))
+    if poisson is not None:
+        meta["poisson_ratio"] = repr(float(poisson))
+    meta.update(extra_metadata or {})
+    return make_trace(t - t[0], d, f, r, meta, name)
+
+
+def read_afm(path, *, radius=None, poisson=None, segments=("approach",), baseline="offset",
+             max_samples: int = MAX_SAMPLES, curves=None, drive: str = "spring"):
+    """The traces of an AFM or indenter vendor file, read through afmformats (a list: a force
+    map gives one per curve), SI, ready for :func:`fit_traces` (see the module docstring).
+
+    Args:
+        path: a JPK ``.jpk-force``/``.jpk-force-map``/``.jpk-qi-*``, Igor ``.ibw``, afmformats
+            ``.h5``/``.tab`` or Optics11 Chiaro ``.txt`` file.
+        radius: tip radius R [m]; None takes the file's (Chiaro), else a TraceError.
+        poisson: the sample's Poisson ratio (kept in the metadata: E = E*(1 - ν²) in reports).
+        segments: "pause", "approach", "dwell", "retract"; the approach is required.
+        baseline: "offset" (median force before contact) or "tilt" (a line in the travel).
+        max_samples: samples per curve after block means (≥ 20).
+        curves: indices of the curves to keep (default all).
+        drive: "spring" (the cantilever; default) or "force" (load control of a
+            constant-force dwell: segments approach and dwell).
+    """
+    all_curves = load_curves(path)
+    pick = range(len(all_curves)) if curves is None else curves
+    out = []
+    extra = _vendor_e(path)
+    for i in pick:
+        if not 0 <= i < len(all_curves):
+            raise TraceError(f"{path}: curve {i} does not exist (the file has "
+                             f"{len(all_curves)} curve(s), 0 to {len(all_curves) - 1})")
+        name = os.fspath(path) if len(all_curves) == 1 else f"{os.fspath(path)}#{i}"
+        out.append(curve_to_trace(all_curves[i], radius=radius, poisson=poisson,
+                                  segments=segments, baseline=baseline, max_samples=max_samples,
+                                  name=name, extra_metadata=extra, drive=drive))
+    return out

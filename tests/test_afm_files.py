@@ -1,0 +1,308 @@
+"""Real AFM and indenter files through afmformats (fitting._afm) and one real fit.
+
+The instrument files are not in this repository: the pinned source distributions of
+afmformats and nanite (their tests/ and examples/ hold them) are downloaded from the package
+index into a cache (``LUBJAX_TESTDATA``, default ~/.cache/lubjax/testdata) on first use. Without
+the index, or without afmformats installed (``pip install lubjax[afm]``), these tests skip.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import tarfile
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+afmformats = pytest.importorskip("afmformats", reason="needs afmformats: pip install lubjax[afm]")
+
+from fitting import _afm  # noqa: E402
+from fitting._cli import main  # noqa: E402
+from fitting._io import MAX_TRAVEL_OVER_RADIUS, TraceError  # noqa: E402
+
+SDISTS = {"afmformats": "0.18.7", "nanite": "4.2.3"}
+ZEBRAFISH_R = 18.64e-6  # the indenter radius nanite's own example fits this curve with
+
+
+def _cache_dir() -> Path:
+    return Path(os.environ.get("LUBJAX_TESTDATA", Path.home() / ".cache/lubjax/testdata"))
+
+
+@pytest.fixture(scope="module")
+def data_dir() -> Path:
+    """The instrument files of the pinned sdists, extracted once (skip without the index).
+
+    Each sdist is downloaded and extracted into a private folder, then renamed into place:
+    test workers running at once (pytest -n) never see half a folder."""
+    root = _cache_dir()
+    root.mkdir(parents=True, exist_ok=True)
+    for name, version in SDISTS.items():
+        final = root / f"{name}-{version}"
+        if final.is_dir():
+            continue
+        with tempfile.TemporaryDirectory(dir=root) as tmp:
+            cmd = [sys.executable, "-m", "pip", "download", "-q", "--no-deps", "--no-binary",
+                   ":all:", "-d", tmp, f"{name}=={version}"]
+            run = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+            archive = Path(tmp) / f"{name}-{version}.tar.gz"
+            if run.returncode != 0 or not archive.exists():
+                pytest.skip(f"the package index is not reachable (pip download {name}=="
+                            f"{version} failed): {run.stderr.strip()[-200:]}")
+            with tarfile.open(archive) as tar:
+                members = [m for m in tar.getmembers() if m.isfile() and (
+                    "/tests/data/" in m.name or "/examples/data/" in m.name)]
+                tar.extractall(tmp, members=members, filter="data")
+            for zipped in (Path(tmp) / final.name).glob("tests/data/fmt-chiaro-*.zip"):
+                with zipfile.ZipFile(zipped) as z:
+                    z.extractall(zipped.parent)
+            try:
+                os.rename(Path(tmp) / final.name, final)
+            except OSError:  # another worker was first
+                if not final.is_dir():
+                    raise
+    return root
+
+
+def _vendor(root: Path, name: str) -> Path:
+    return root / f"afmformats-{SDISTS['afmformats']}/tests/data" / name
+
+
+def _zebrafish(root: Path) -> Path:
+    examples = root / f"nanite-{SDISTS['nanite']}/examples/data"
+    return examples / "zebrafish-head-section-gray-matter.jpk-force"
+
+
+def _check_trace(tr, k_file: float):
+    """The conversion: SI, time from 0 increasing, the spring drive with the file's k, the
+    approach toward the sample, the force positive in compression, travel within the model."""
+    assert tr.metadata["drive"] == "spring"
+    assert float(tr.metadata["stiffness_N_m"]) == pytest.approx(k_file, rel=1e-12)
+    assert tr.time[0] == 0.0 and np.all(np.diff(tr.time) > 0)
+    assert tr.displacement[0] == 0.0
+    assert np.max(np.abs(tr.displacement)) <= MAX_TRAVEL_OVER_RADIUS * tr.radius
+    n_appr = tr.time.size if tr.metadata["segments"] == "approach" else tr.time.size // 4
+    d = tr.displacement[:n_appr]
+    assert d[-1] > 0 and np.mean(np.diff(d) >= 0) > 0.9  # monotone up to the sensor's noise
+    f = tr.force
+    tail = f[n_appr - 5:n_appr].mean()
+    # positive in compression: well above the (removed) baseline's noise before contact
+    assert tail > 0 and tail > 3 * np.std(f[: max(5, n_appr // 5)])
+
+
+FORCE_DISTANCE = [
+    ("fmt-jpk-fd_spot3-0192.jpk-force", 1),
+    ("fmt-jpk-fd_map2x2_extracted.jpk-force-map", 4),
+    ("fmt-jpk-fd_2020.02.07-16.29.05.036.jpk-qi-data", 4),
+    ("fmt-jpk-fd_qi-data-2021.04.13.jpk-qi-series", 1),
+    ("fmt-igor-fd_SiN_FD_plot.ibw", 1),
+    ("fmt-hdf5-fd_version_0.13.3.h5", 1),
+    ("fmt-tab-fd_version_0.13.3.tab", 1),
+]
+
+
+@pytest.mark.parametrize("name,n_curves", FORCE_DISTANCE)
+def test_force_distance_files_convert(data_dir, name, n_curves):
+    path = _vendor(data_dir, name)
+    assert _afm.is_afm_file(path)
+    curves = afmformats.load_data(path)
+    traces = _afm.read_afm(path, radius=50e-6, max_samples=200)
+    assert len(traces) == n_curves == len(curves)
+    for tr, curve in zip(traces, curves):
+        _check_trace(tr, curve.metadata["spring constant"])
+        assert tr.time.size <= 200 + 10
+        assert tr.metadata["segments"] == "approach"
+        # the approach only: the kept time span lies within the approach segment's
+        appr = curve["segment"] == 0
+        t_appr = (np.ptp(curve["time"][appr]) if "time" in curve.columns
+                  else appr.sum() / curve.metadata["rate approach"])
+        assert tr.time[-1] <= t_appr
+
+
+def test_chiaro_radius_and_vendor_modulus_from_the_file(data_dir):
+    path = _vendor(data_dir, "fmt-chiaro-txt_AEBP1_Indentation_002.txt")
+    assert _afm.is_afm_file(path)
+    (tr,) = _afm.read_afm(path, max_samples=300)
+    assert tr.radius == pytest.approx(27.5e-6)
+    assert float(tr.metadata["vendor_E_star_Pa"]) == pytest.approx(156.009)
+    assert tr.metadata["stage_column"] == "height (piezo)"
+    _check_trace(tr, 0.019)
+    # the deep approach (13 µm in 27.5 µm) is cut where the model's travel limit is
+    assert "approach_cut_m" in tr.metadata
+
+
+def test_stress_relaxation_dwell_is_kept_at_constant_height(data_dir):
+    """JPK stress relaxation: approach (1 s) then a 30 s constant-height dwell; the stage is
+    the closed-loop height, so it holds still over the dwell while the force relaxes."""
+    path = _vendor(data_dir, "fmt-jpk-sr_cell1-0008.jpk-force")
+    (tr,) = _afm.read_afm(path, radius=200e-6, segments=("approach", "dwell"), max_samples=400)
+    assert tr.metadata["segments"] == "approach,dwell"
+    assert tr.metadata["modality"] == "stress-relaxation"
+    assert 30.0 < tr.time[-1] < 31.0  # the dwell's 30 s and the in-contact part of the ramp
+    dwell = tr.time > tr.time[-1] - 29.0
+    d = tr.displacement[dwell]
+    assert np.ptp(d) < 1e-3 * d.mean()
+    f = tr.force[dwell]
+    assert f[0] > 1.5 * f[-1] > 0  # the relaxation (toward a third of the peak)
+    _check_trace(tr, 1.0677)
+
+
+@pytest.mark.parametrize("name", ["fmt-jpk-cc_pr14-polymergel-2021.06.30.jpk-force",
+                                  "fmt-jpk-cc_pr14-brain-2021.06.30.jpk-force"])
+def test_creep_compliance_dwell_holds_the_force(data_dir, name):
+    """JPK creep compliance: the force is held over the 3 s dwell while the stage creeps in."""
+    path = _vendor(data_dir, name)
+    (tr,) = _afm.read_afm(path, radius=100e-6, segments=("approach", "dwell"), max_samples=400)
+    assert tr.metadata["modality"] == "creep-compliance"
+    dwell = tr.time > tr.time[-1] - 2.9
+    f, d = tr.force[dwell], tr.displacement[dwell]
+    assert np.std(f) < 0.02 * f.mean()
+    assert d[-1] > d[0]  # creep: the stage moves on toward the sample under the held force
+    _check_trace(tr, afmformats.load_data(path)[0].metadata["spring constant"])
+
+
+def test_creep_compliance_as_load_control(data_dir):
+    """``drive="force"``: the input is the held force (from rest: the first sample within the
+    baseline's noise before contact), the response the tip's own travel, stage less F/k."""
+    path = _vendor(data_dir, "fmt-jpk-cc_pr14-polymergel-2021.06.30.jpk-force")
+    (curve,) = afmformats.load_data(path)
+    (tr,) = _afm.read_afm(path, radius=20e-6, segments=("approach", "dwell"), drive="force",
+                          max_samples=300)
+    (spring,) = _afm.read_afm(path, radius=20e-6, segments=("approach", "dwell"),
+                              max_samples=300)
+    assert float(tr.metadata["stiffness_N_m"]) == curve.metadata["spring constant"]
+    assert tr.metadata["drive"] == "force"
+    peak = float(np.max(tr.force))
+    assert tr.force[0] < 0.05 * peak  # starts from (nearly) no load
+    dwell = tr.time > tr.time[-1] - 2.9
+    assert np.std(tr.force[dwell]) < 0.02 * peak
+    # the tip's travel over the dwell equals the stage's: the force, so the bending, is held
+    creep_tip = tr.displacement[dwell][-1] - tr.displacement[dwell][0]
+    creep_stage = spring.displacement[dwell][-1] - spring.displacement[dwell][0]
+    assert creep_tip == pytest.approx(creep_stage, rel=0.05)
+    # over the same time (both end with the dwell) the tip lags the stage by the bending ΔF/k
+    t0 = spring.time[-1] - tr.time[-1]
+    stage = spring.displacement[-1] - np.interp(t0, spring.time, spring.displacement)
+    lag = stage - (tr.displacement[-1] - tr.displacement[0])
+    k = curve.metadata["spring constant"]
+    assert lag == pytest.approx((tr.force[-1] - tr.force[0]) / k, rel=0.1)
+    with pytest.raises(TraceError, match="--segments approach,dwell"):
+        _afm.read_afm(path, radius=20e-6, drive="force")
+    with pytest.raises(ValueError, match="drive must be one of spring, force"):
+        _afm.read_afm(path, radius=20e-6, drive="travel")
+
+
+def test_deep_dwell_beyond_the_thin_film_model_is_refused(data_dir):
+    path = _vendor(data_dir, "fmt-jpk-sr_cell1-0008.jpk-force")
+    with pytest.raises(TraceError, match=r"needs travel <= 0.2 R"):
+        _afm.read_afm(path, radius=20e-6, segments=("approach", "dwell"))
+
+
+def test_bad_input_is_named(data_dir, monkeypatch):
+    zf = _zebrafish(data_dir)
+    with pytest.raises(TraceError, match="no tip radius: pass --radius"):
+        _afm.read_afm(zf)
+    with pytest.raises(TraceError, match="no dwell segment.*has approach, retract"):
+        _afm.read_afm(zf, radius=ZEBRAFISH_R, segments=("approach", "dwell"))
+    with pytest.raises(TraceError, match="retract is not fitted: adhesion.*cavitation"):
+        _afm.read_afm(zf, radius=ZEBRAFISH_R, segments=("approach", "retract"))
+    with pytest.raises(ValueError, match="unknown segment.*allowed: pause, approach"):
+        _afm.parse_segments("approach,hold")
+    with pytest.raises(TraceError, match="curve 7 does not exist.*4 curve"):
+        _afm.read_afm(_vendor(data_dir, "fmt-jpk-fd_map2x2_extracted.jpk-force-map"),
+                      radius=10e-6, curves=[7])
+    with pytest.raises(TraceError, match="afmformats cannot read it.*spring constant"):
+        _afm.read_afm(_vendor(data_dir, "fmt-jpk-fd_single-modified_2023.jpk-force"), radius=1e-5)
+    monkeypatch.setitem(sys.modules, "afmformats", None)
+    with pytest.raises(TraceError, match=r"pip install lubjax\[afm\]"):
+        _afm.read_afm(zf, radius=ZEBRAFISH_R)
+
+
+def test_tilt_baseline_removes_a_line_in_the_travel(data_dir):
+    """A line in the stage height added to the force (drift, interference) leaves the tilt
+    baseline's trace unchanged; the offset baseline keeps the slope."""
+    zf = _zebrafish(data_dir)
+    (curve,) = afmformats.load_data(zf)
+    (flat,) = [_afm.curve_to_trace(curve, radius=ZEBRAFISH_R, baseline=b) for b in ("tilt",)]
+    (off,) = [_afm.curve_to_trace(curve, radius=ZEBRAFISH_R)]
+    curve["force"] = curve["force"] + 2e-6 * curve["height (measured)"]  # 2e-6 N/m
+    tilted = _afm.curve_to_trace(curve, radius=ZEBRAFISH_R, baseline="tilt")
+    shifted = _afm.curve_to_trace(curve, radius=ZEBRAFISH_R)
+    peak = float(np.max(flat.force))
+    assert tilted.time.size == flat.time.size
+    assert np.max(np.abs(tilted.force - flat.force)) < 1e-3 * peak
+    drift = 2e-6 * np.ptp(off.displacement)
+    assert np.max(np.abs(shifted.force - off.force)) > 0.5 * drift
+    assert flat.metadata["baseline"] == "tilt" and off.metadata["baseline"] == "offset"
+
+
+@pytest.mark.slow
+def test_zebrafish_curve_fits_end_to_end(data_dir, tmp_path, capsys):
+    """``lubjax-fit FILE.jpk-force``: the zebrafish gray-matter curve (nanite's example) on its
+    approach, 300 samples, rtol 1e-3: converged, E* of soft tissue with a tight error, and the
+    figure written."""
+    out, png = tmp_path / "fit.json", tmp_path / "fit.png"
+    rc = main([str(_zebrafish(data_dir)), "--radius", str(ZEBRAFISH_R), "--poisson", "0.5",
+               "--max-samples", "300", "--rtol", "1e-3", "--out", str(out), "--plot", str(png),
+               "--quiet", "--no-cache"])
+    assert rc == 0, capsys.readouterr()
+    res = json.loads(out.read_text())
+    e_star, err = res["E_star_Pa"], res["stderr"]["E_star_Pa"]
+    assert res["converged"]
+    assert 30.0 < e_star < 3000.0  # soft neural tissue: tens of Pa to a few kPa
+    assert 0 < err < 0.2 * e_star
+    assert 0 < res["z0_m"] < float(res["metadata"]["approach_cut_m"])
+    assert res["E_Pa"] == pytest.approx(0.75 * e_star)
+    assert math.isfinite(res["beta"])
+    assert res["plausible"] and not any("soft lubricated" in f for f in res["flags"])
+    assert png.stat().st_size > 10_000
+    if os.environ.get("LUBJAX_KEEP_FIGURES"):
+        Path(os.environ["LUBJAX_KEEP_FIGURES"]).mkdir(parents=True, exist_ok=True)
+        (Path(os.environ["LUBJAX_KEEP_FIGURES"]) / "afm_zebrafish_fit.png").write_bytes(
+            png.read_bytes())
+
+
+def test_force_map_gives_one_trace_and_one_plot_name_per_curve(data_dir):
+    import fitting._cli as cli
+
+    path = _vendor(data_dir, "fmt-jpk-fd_map2x2_extracted.jpk-force-map")
+    args = cli.build_parser().parse_args([str(path), "--radius", "10e-6", "--plot", "fit.png"])
+    traces = cli._read_all(args, {})
+    assert [t.name for t in traces] == [f"{path}#{i}" for i in range(4)]
+    plots = cli.plot_paths("fit.png", [cli._curve_label(t.name) for t in traces])
+    assert plots == [f"fit_{path.name.split('.')[0]}_curve{i}.png" for i in range(4)]
+    args = cli.build_parser().parse_args([str(path), "--radius", "10e-6", "--curve", "2"])
+    assert [t.name for t in cli._read_all(args, {})] == [f"{path}#2"]
+
+
+def test_afm_options_on_a_plain_trace_are_a_usage_error(capsys):
+    rc = main(["data/paper_dc140.csv", "--radius", "1e-3", "--quiet"])
+    assert rc == 2
+    assert "--radius: only for AFM vendor files" in capsys.readouterr().err
+    rc = main(["data/paper_dc140.csv", "--segments", "approach,hold", "--quiet"])
+    assert rc == 2 and "unknown segment(s) hold" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_polymer_gel_creep_fits_as_a_viscoelastic_solid(data_dir, tmp_path, capsys):
+    """``--drive force --segments approach,dwell --substrate viscoelastic`` on the JPK
+    creep-compliance curve of the polymer gel: converged, a creeping solid (E0/E∞ > 1, τ within
+    the 3 s dwell) whose relaxed E* is that of a soft gel, with tight errors."""
+    out = tmp_path / "creep.json"
+    path = _vendor(data_dir, "fmt-jpk-cc_pr14-polymergel-2021.06.30.jpk-force")
+    rc = main([str(path), "--radius", "10e-6", "--drive", "force", "--segments",
+               "approach,dwell", "--substrate", "viscoelastic", "--max-samples", "300",
+               "--rtol", "1e-3", "--out", str(out), "--quiet", "--no-cache"])
+    assert rc == 0, capsys.readouterr()
+    res = json.loads(out.read_text())
+    assert res["converged"] and res["model"]["drive"] == "force"
+    assert 100.0 < res["E_star_Pa"] < 1e4
+    assert res["stderr"]["E_star_Pa"] < 0.1 * res["E_star_Pa"]
+    assert 1.0 < res["stiffening"] < 5.0
+    assert 0.01 < res["relaxation_time_s"] < 3.0
