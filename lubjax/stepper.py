@@ -24,25 +24,28 @@ Contents:
   (F̄ = c·p̄, eq 11b).
 """
 
-from ._controller import Tolerance
+from ._controller import Status, Tolerance, stop_reason
 from ._discretisation import Discretisation, discretise, displacement, film_thickness
 from ._influence import force_weights, influence_matrix, kernel
 from ._layer import layer_influence_matrix
-from ._rollout import State, Step, Trajectory, evaluate, rollout
+from ._rollout import State, Step, Trajectory, evaluate, evaluate_host, rollout
 
 __all__ = [
     "Discretisation",
     "State",
+    "Status",
     "Step",
     "Tolerance",
     "Trajectory",
     "discretise",
     "displacement",
     "evaluate",
+    "evaluate_host",
     "film_thickness",
     "force_weights",
     "influence_matrix",
     "kernel",
     "layer_influence_matrix",
     "rollout",
+    "stop_reason",
 ]
