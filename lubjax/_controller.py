@@ -30,11 +30,12 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-import functools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+
+from ._pytree import register
 
 SAFETY = 0.9
 BETA_1 = 0.7
@@ -54,11 +55,6 @@ BACKWARD_EULER_FORCE = 10.0 * FORCE_ATOL
 TAIL_TIGHTENING = 3.0
 
 
-@functools.partial(
-    jax.tree_util.register_dataclass,
-    data_fields=["rtol", "atol", "initial_step", "force_floor"],
-    meta_fields=["order", "max_steps", "film_error"],
-)
 @dataclasses.dataclass(frozen=True)
 class Tolerance:
     """What the controller needs. A pytree: the numbers (rtol, atol, initial_step,
@@ -86,6 +82,8 @@ class Tolerance:
     film_error: str = "relative"
 
 
+register(Tolerance, data=("rtol", "atol", "initial_step", "force_floor"),
+         static=("order", "max_steps", "film_error"))
 DEFAULT_TOLERANCE = Tolerance()
 
 
