@@ -140,3 +140,42 @@ def test_history_push_shifts_every_field_by_one_level(order):
     # BDF3 reads one level more of everything it extrapolates or sums over
     assert history_depths(3).film == history_depths(2).film + 1
     assert history_depths(1) == history_depths(2)
+
+
+def test_saver_shifts_entries_and_reads_profiles_by_the_steps_dense_output():
+    """The saver (lubjax/_rollout.py) on its own: an accepted step t → t_new moves the entry
+    indices down one level, and a profile time inside (t, t_new] gets the step's interpolant of
+    p̄, z̄ and h̄ (here exact: quadratic data, a BDF2 step); one outside keeps what it had."""
+    from lubjax._rollout import Output, _save
+    from lubjax._stepper import Candidate, Estimate
+
+    n, t = 3, 1.0  # levels at t = 0.5, 0.8, 1.0; the new one at 1.25
+    t_new = 1.25
+
+    def q(s):  # quadratic in time, one value per node
+        return jnp.asarray([s**2, 2 * s**2 - s, 1.0 + s])
+
+    rest = Level(dt=jnp.asarray(1.0), pressure=jnp.zeros(n), elastic_load=jnp.zeros(n),
+                 memory=jnp.zeros((0, n)), film=jnp.ones(n), gap=jnp.asarray(0.0),
+                 gap_step=jnp.asarray(0.0), velocity=jnp.asarray(0.0), force=jnp.asarray(0.0))
+    history = start_history(rest, 2)
+    for time_, dt in ((0.5, 1.0), (0.8, 0.3), (1.0, 0.2)):
+        history = push(history, rest._replace(dt=jnp.asarray(dt), pressure=q(time_),
+                                              film=q(time_) + 1, gap=jnp.asarray(time_ ** 2)))
+    new = rest._replace(dt=jnp.asarray(t_new - t), pressure=q(t_new), film=q(t_new) + 1,
+                        gap=jnp.asarray(t_new**2))
+    candidate = Candidate(new, Estimate(*(jnp.zeros(()),) * 4), jnp.asarray(2), 0.0, 0.0,
+                          jnp.zeros(n - 1))
+    times = jnp.asarray([0.9, 1.1, 1.25, 1.3])
+    before = Output(jnp.asarray([7, 6, 5]), jnp.full((4, n), -1.0), jnp.full(4, -1.0),
+                    jnp.full((4, n), -1.0))
+    after = _save(before, 8, jnp.asarray(t), jnp.asarray(t_new), history, candidate, times)
+    np.testing.assert_array_equal(np.asarray(after.entries), [8, 7, 6])
+    for j, s in enumerate(np.asarray(times)):
+        inside = t < s <= t_new
+        expect_p = np.asarray(q(s)) if inside else np.full(n, -1.0)
+        np.testing.assert_allclose(np.asarray(after.profiles[j]), expect_p, rtol=1e-13)
+        np.testing.assert_allclose(float(after.profile_gaps[j]), s**2 if inside else -1.0,
+                                   rtol=1e-13)
+        np.testing.assert_allclose(np.asarray(after.profile_films[j]),
+                                   expect_p + 1 if inside else np.full(n, -1.0), rtol=1e-13)
