@@ -180,19 +180,17 @@ def _contact_index(d: np.ndarray, f: np.ndarray) -> int:
     return int(below[-1]) + 1 if below.size else 0
 
 
-def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
-                   baseline: str = "offset", max_samples: int = MAX_SAMPLES, name: str = "curve",
-                   extra_metadata=None, drive: str = "spring"):
-    """One afmformats curve as a :class:`fitting.Trace` (see the module docstring): for the
-    spring drive (default), or for load control (``drive="force"``, a constant-force dwell as
-    creep: the input is the force, the response the tip's approach)."""
+def _check_options(drive, baseline, max_samples) -> None:
     if drive not in DRIVES:
         raise ValueError(f"drive must be one of {', '.join(DRIVES)}, got {drive!r}")
     if baseline not in BASELINES:
         raise ValueError(f"baseline must be one of {', '.join(BASELINES)}, got {baseline!r}")
     if not (isinstance(max_samples, int) and max_samples >= 20):
         raise ValueError(f"max_samples must be an integer >= 20, got {max_samples!r}")
-    a = curve_arrays(curve, name)
+
+
+def _tip_radius(curve, radius, name):
+    """(R, where it came from): ``radius`` if given, else the file's (a Chiaro export)."""
     r = radius
     where = "--radius"
     if r is None:
@@ -201,6 +199,11 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
         where = "the file's tip radius"
     if r is None:
         raise TraceError(f"{name}: the file gives no tip radius: pass --radius R (metres)")
+    return r, where
+
+
+def _segment_order(a, segments, drive, name) -> list:
+    """The segments fitted, in the curve's order; refuses what the model cannot fit."""
     present = [s for s in dict.fromkeys(a["segment"])]
     missing = [s for s in segments if s not in present]
     if missing:
@@ -216,6 +219,31 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
     if drive == "force" and order != ["approach", "dwell"]:
         raise TraceError(f"{name}: load control (drive force) fits the approach and a "
                          "constant-force dwell: --segments approach,dwell")
+    return order
+
+
+def _decimate(t, d, f, lab, order, max_samples):
+    """Block means per segment, the segments' shares of ``max_samples`` in proportion to
+    their counts."""
+    parts = []
+    for s in order:
+        idx = np.flatnonzero(lab == s)
+        n_out = max(10, int(round(max_samples * idx.size / lab.size)))
+        parts.append([_block_mean(x[idx], n_out) for x in (t, d, f)])
+    t, d, f = (np.concatenate([p[i] for p in parts]) for i in range(3))
+    return t, d, f
+
+
+def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
+                   baseline: str = "offset", max_samples: int = MAX_SAMPLES, name: str = "curve",
+                   extra_metadata=None, drive: str = "spring"):
+    """One afmformats curve as a :class:`fitting.Trace` (see the module docstring): for the
+    spring drive (default), or for load control (``drive="force"``, a constant-force dwell as
+    creep: the input is the force, the response the tip's approach)."""
+    _check_options(drive, baseline, max_samples)
+    a = curve_arrays(curve, name)
+    r, where = _tip_radius(curve, radius, name)
+    order = _segment_order(a, segments, drive, name)
     keep = np.isin(a["segment"], order)
     t, h, f, lab = a["time"][keep], a["height"][keep], a["force"][keep], a["segment"][keep]
     d = h[0] - h
@@ -271,13 +299,7 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
     d_first = float(d[start])
     contact = d_contact - d_first
     t, d, f, lab = t[sel], d[sel] - d[start], f[sel], lab[sel]
-    # block means per segment, the segments' shares of the samples in proportion to their count
-    parts = []
-    for s in order:
-        idx = np.flatnonzero(lab == s)
-        n_out = max(10, int(round(max_samples * idx.size / lab.size)))
-        parts.append([_block_mean(x[idx], n_out) for x in (t, d, f)])
-    t, d, f = (np.concatenate([p[i] for p in parts]) for i in range(3))
+    t, d, f = _decimate(t, d, f, lab, order, max_samples)
     d = d - d[0]  # the first block's mean: travel since the first row kept
     reach = float(np.max(np.abs(d)))
     what = ("the stage travel kept ({:.3g} m: the indentation, the cantilever's bending F/k "

@@ -227,6 +227,14 @@ def build_parser() -> Parser:
         "documentation (docs/guide/trace-format.md) has it all.",
         epilog=_epilog(),
     )
+    for add in (_add_trace_options, _add_model_options, _add_output_options, _add_fit_options):
+        add(p)
+    add_debug_flag(p)
+    return p
+
+
+def _add_trace_options(p) -> None:
+    """The traces and how to read them (exports, units, vendor files)."""
     p.add_argument("traces", nargs="+", help="trace file(s)")
     p.add_argument("--columns", help="which cells hold the trace, by header name or number "
                    "(from 1): 'time=Time (s),displacement=Piezo (nm),force=Load (uN)' or "
@@ -259,18 +267,14 @@ def build_parser() -> Parser:
     afm.add_argument("--max-samples", type=positive_int, default=_afm.MAX_SAMPLES,
                      help=f"decimate each curve to this many samples by block means (default "
                      f"{_afm.MAX_SAMPLES})")
+
+
+def _add_model_options(p) -> None:
+    """What is fitted: drive, substrate, fixed and shared parameters, model comparison."""
     p.add_argument("--fix", action="append", metavar="NAME=VALUE",
                    help="hold a parameter at a known value in SI units instead of fitting it, "
                    "e.g. --fix viscosity=1e-3 (names: E_star, viscosity, z0, stiffening, "
                    "relaxation_time, offset); repeat or separate with commas")
-    p.add_argument("--out", help="JSON output (one object, or a list for several traces)")
-    p.add_argument("--table", help="also write a CSV table, one row per trace")
-    p.add_argument(
-        "--plot",
-        help="figure of data, model, residuals and the fit report (.png, .pdf, .svg, ...; one "
-        "per trace: the trace name is appended when there are several)",
-    )
-    p.add_argument("--report", help="also write the text fit report(s) to this file")
     p.add_argument(
         "--drive", choices=DRIVES, default=None,
         help="what the instrument prescribes: travel (position control; default), force (load "
@@ -293,13 +297,28 @@ def build_parser() -> Parser:
                    "against the layer, otherwise the half-space against a viscoelastic solid")
     p.add_argument("--shared", help="joint fit: parameters shared by all traces, e.g. "
                    "E_star,viscosity (the others, and the offsets, are fitted per trace)")
+    p.add_argument("--no-offset", action="store_true", help="do not fit a constant offset")
+
+
+def _add_output_options(p) -> None:
+    p.add_argument("--out", help="JSON output (one object, or a list for several traces)")
+    p.add_argument("--table", help="also write a CSV table, one row per trace")
+    p.add_argument(
+        "--plot",
+        help="figure of data, model, residuals and the fit report (.png, .pdf, .svg, ...; one "
+        "per trace: the trace name is appended when there are several)",
+    )
+    p.add_argument("--report", help="also write the text fit report(s) to this file")
+
+
+def _add_fit_options(p) -> None:
+    """The optimiser, the noise model and the solver's accuracy."""
     p.add_argument("--method", choices=METHODS, default="lm",
                    help="optimiser: Levenberg-Marquardt (default), trf (scipy least_squares) "
                    "or lbfgs (optax)")
     p.add_argument("--noise", choices=("auto", "white", "ar1"), default="auto",
                    help="noise model of the errors: auto (AR(1) when the residuals are not "
                    "white; default), white, ar1")
-    p.add_argument("--no-offset", action="store_true", help="do not fit a constant offset")
     p.add_argument("--max-iter", type=positive_int, default=60, help="iteration limit (default 60)")
     p.add_argument("--rtol", type=positive_float, default=None,
                    help="the model's accuracy: local error tolerance of each step, and the mesh "
@@ -312,8 +331,6 @@ def build_parser() -> Parser:
     p.add_argument("--no-cache", action="store_true",
                    help="do not use the persistent compilation cache (also LUBJAX_CACHE=0)")
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
-    add_debug_flag(p)
-    return p
 
 
 def _spec_options(args, n_traces):
@@ -397,25 +414,7 @@ def _run(args) -> int:
     outputs = [("--out", args.out), ("--table", args.table), ("--report", args.report)] + [
         ("--plot", p) for p in plots]
     check_outputs(outputs, inputs=args.traces, input_label="input trace")
-    start = time.perf_counter()
-    shown = False
-    tty = sys.stderr.isatty()
-
-    def progress(msg):
-        # A terminal gets one line redrawn in place; a redirected log one plain line per
-        # message, with no control characters.
-        nonlocal shown
-        if args.quiet:
-            return
-        line = f"[{time.perf_counter() - start:6.1f} s] {msg}"
-        if tty:
-            shown = True
-            width = shutil.get_terminal_size().columns - 1
-            sys.stderr.write("\r\033[K" + line[:width])
-        else:
-            sys.stderr.write(line + "\n")
-        sys.stderr.flush()
-
+    progress = _Progress(args.quiet)
     comparison = None
     read_kw = dict(force_sign=args.force_sign)
     if args.columns is not None:
@@ -456,9 +455,13 @@ def _run(args) -> int:
         else:
             results, other = fit_traces(traces, spec=spec, **kw), None
     finally:
-        if shown:  # clear the progress line: an error message or the summary follows
-            sys.stderr.write("\r\033[K")
-            sys.stderr.flush()
+        progress.clear()  # an error message or the summary follows
+    _write_results(args, results, other, comparison, plots)
+    return EXIT_OK if all(r.converged for r in results) else EXIT_FAILED
+
+
+def _write_results(args, results, other, comparison, plots) -> None:
+    """The summary lines on stdout, then every output asked for."""
     for res in results:
         print(summary_line(res))
         for flag in res.flags[1:]:
@@ -484,7 +487,32 @@ def _run(args) -> int:
     for res, path in zip(results, plots):
         plot_fit(res, path)
         print(f"wrote {path}")
-    return EXIT_OK if all(r.converged for r in results) else EXIT_FAILED
+
+
+class _Progress:
+    """The progress line on stderr: a terminal gets one line redrawn in place; a redirected log
+    one plain line per message, with no control characters."""
+
+    def __init__(self, quiet: bool):
+        self.quiet, self.shown = quiet, False
+        self.start, self.tty = time.perf_counter(), sys.stderr.isatty()
+
+    def __call__(self, msg: str) -> None:
+        if self.quiet:
+            return
+        line = f"[{time.perf_counter() - self.start:6.1f} s] {msg}"
+        if self.tty:
+            self.shown = True
+            width = shutil.get_terminal_size().columns - 1
+            sys.stderr.write("\r\033[K" + line[:width])
+        else:
+            sys.stderr.write(line + "\n")
+        sys.stderr.flush()
+
+    def clear(self) -> None:
+        if self.shown:
+            sys.stderr.write("\r\033[K")
+            sys.stderr.flush()
 
 
 def _curve_label(name: str) -> str:

@@ -471,12 +471,9 @@ def _header_cells(line: str, sep, n: int | None) -> list[str]:
     return cells
 
 
-def _scan(lines, name: str, columns=None, units=None, force_sign=1.0):
-    """Read ``(lineno, text)`` pairs until the numeric block has begun; find the separator, the
-    header row (vendor lines before it skipped), the metadata and each column's cell and unit.
-
-    Returns (layout, pending): ``pending`` are the lines read after the header row (or, without
-    one, from the first data row), still to be parsed as data."""
+def _preamble(lines, name: str) -> list:
+    """The ``(lineno, stripped text)`` lines up to and including the first run of
+    ``_NUMERIC_RUN`` numeric-looking rows (where the data have surely begun)."""
     buf = []
     run = 0
     for lineno, raw in lines:
@@ -490,13 +487,12 @@ def _scan(lines, name: str, columns=None, units=None, force_sign=1.0):
             run = run + 1 if _NUMERIC_LOOK.match(line) else 0
             if run >= _NUMERIC_RUN:
                 break
-    body = [(k, (n, line)) for k, (n, line) in enumerate(buf) if line and not line.startswith("#")]
-    sep, comma = _detect_separator([x for _, x in body])
-    by_number = columns is not None and all(isinstance(v, int) for v in columns.values())
-    idx = sorted(columns.values()) if by_number else None
-    first = next((i for i, (_, (_, line)) in enumerate(body)
-                  if _is_numeric(_split(line, sep), comma, idx)), None)
-    n_data = len(_split(body[first][1][1], sep)) if first is not None else None
+    return buf
+
+
+def _header_index(body, first, sep, n_data, columns, by_number, idx, name: str):
+    """Index into ``body`` of the header row (None: a file without one, read by column number);
+    ``first``: index of the first data row."""
     expected = ",".join(COLUMNS)
 
     def no_header():
@@ -505,7 +501,7 @@ def _scan(lines, name: str, columns=None, units=None, force_sign=1.0):
             "number, e.g. --columns time=1,displacement=2,force=3)"
         )
 
-    h = None  # index into body of the header row
+    h = None
     if columns is None:
         h = next((i for i, (_, (_, line)) in enumerate(body[:first])
                   if any(_canonical(c) for c in _split(line, sep))), None)
@@ -544,6 +540,52 @@ def _scan(lines, name: str, columns=None, units=None, force_sign=1.0):
                 f"{name}: line {n}: column {missing!r} not found; the header has: "
                 f"{', '.join(repr(c) for c in cells)} (separated by {_SEPARATOR_NAMES[sep]})"
             )
+    return h
+
+
+def _column_scales(metadata, meta_line, labels, header_units, head_line, units, force_sign,
+                   name: str) -> list:
+    """Each column's factor to SI (and the force's sign): a ``--units`` option over a
+    ``# units:`` line over a unit in the header cell, else SI. Notes what was converted in
+    ``metadata["read_as"]``."""
+    declared = {}
+    if "units" in metadata:
+        declared = parse_units(metadata.pop("units"), f"{name}: line {meta_line['units']}: units")
+    declared.update(units or {})
+    scale, read_as = [], []
+    for q, label, hu in zip(QUANTITIES, labels, header_units, strict=True):
+        if q in declared:
+            u = declared[q]
+        elif hu is not None:
+            u = _unit(q, hu, f"{name}: line {head_line}: column {label!r}")
+        else:
+            u = next(iter(UNITS[q]))
+        scale.append(UNITS[q][u])
+        if scale[-1] != 1.0:
+            read_as.append(f"{q} in {u}")
+    if force_sign == -1:
+        scale[2] = -scale[2]
+        read_as.append("force sign flipped")
+    if read_as:
+        metadata["read_as"] = ", ".join(read_as)
+    return scale
+
+
+def _scan(lines, name: str, columns=None, units=None, force_sign=1.0):
+    """Read ``(lineno, text)`` pairs until the numeric block has begun; find the separator, the
+    header row (vendor lines before it skipped), the metadata and each column's cell and unit.
+
+    Returns (layout, pending): ``pending`` are the lines read after the header row (or, without
+    one, from the first data row), still to be parsed as data."""
+    buf = _preamble(lines, name)
+    body = [(k, (n, line)) for k, (n, line) in enumerate(buf) if line and not line.startswith("#")]
+    sep, comma = _detect_separator([x for _, x in body])
+    by_number = columns is not None and all(isinstance(v, int) for v in columns.values())
+    idx = sorted(columns.values()) if by_number else None
+    first = next((i for i, (_, (_, line)) in enumerate(body)
+                  if _is_numeric(_split(line, sep), comma, idx)), None)
+    n_data = len(_split(body[first][1][1], sep)) if first is not None else None
+    h = _header_index(body, first, sep, n_data, columns, by_number, idx, name)
     if h is not None:
         k_head, (head_line, head_text) = body[h]
         start = k_head + 1
@@ -573,26 +615,8 @@ def _scan(lines, name: str, columns=None, units=None, force_sign=1.0):
     if "poisson_ratio" in metadata:
         _poisson(metadata["poisson_ratio"], f"{name}: line {meta_line['poisson_ratio']}")
     _check_model_keys(metadata, lambda key: f"{name}: line {meta_line[key]}")
-    declared = {}
-    if "units" in metadata:
-        declared = parse_units(metadata.pop("units"), f"{name}: line {meta_line['units']}: units")
-    declared.update(units or {})
-    scale, read_as = [], []
-    for q, label, hu in zip(QUANTITIES, labels, header_units, strict=True):
-        if q in declared:
-            u = declared[q]
-        elif hu is not None:
-            u = _unit(q, hu, f"{name}: line {head_line}: column {label!r}")
-        else:
-            u = next(iter(UNITS[q]))
-        scale.append(UNITS[q][u])
-        if scale[-1] != 1.0:
-            read_as.append(f"{q} in {u}")
-    if force_sign == -1:
-        scale[2] = -scale[2]
-        read_as.append("force sign flipped")
-    if read_as:
-        metadata["read_as"] = ", ".join(read_as)
+    scale = _column_scales(metadata, meta_line, labels, header_units, head_line, units,
+                           force_sign, name)
     layout = _Layout(metadata, radius, sep, comma, tuple(use), tuple(labels), ncells, exact,
                      tuple(scale), head_line)
     return layout, buf[start:]
