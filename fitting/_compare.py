@@ -100,15 +100,39 @@ def _naming(progress, spec):
 def compare_models(traces, *, simple=None, rich=None, tau_start=1.0, **fit_kwargs):
     """Fit the default and a richer model to the same traces and compare them.
 
+    The comparison (module docstring of :mod:`fitting._compare`): the likelihood ratio with a
+    nominal χ² p-value, ΔAIC and ΔBIC; the richer model is chosen only when ΔBIC = BIC_simple -
+    BIC_rich > ``BIC_MARGIN`` (10).
+
     Args:
         traces: the traces (fitted separately, or jointly with ``shared=`` in ``fit_kwargs``).
         simple: the default :class:`ModelSpec` (default: the traces' drive, elastic half-space).
         rich: the richer spec (default: ``simple`` with a viscoelastic solid).
         tau_start: the richer model's start for τ, in units of t_c; its other parameters start
             at the simple fit's optimum (E0/E∞ at 1.2).
-        fit_kwargs: passed to :func:`fitting.fit_traces`.
-    Returns (simple results, rich results, comparison dict); the dict is also in each result's
-    ``stats["comparison"]``.
+        **fit_kwargs: passed to :func:`fitting.fit_traces`.
+
+    Returns:
+        (simple results, rich results, comparison dict): two lists of :class:`FitResult`, one
+        per trace, and the dict of the comparison (``likelihood_ratio``, ``p_value_nominal``,
+        ``delta_aic``, ``delta_bic``, ``choice``, the text ``report``, ...); the dict is also
+        in each result's ``stats["comparison"]``.
+
+    Raises:
+        ValueError: as :func:`fitting.fit_traces`, for either fit.
+
+    Example:
+        ```python
+        import dataclasses
+        import fitting
+
+        trace = fitting.read_trace("data/paper_dc140.csv")
+        coarse = dataclasses.replace(fitting.FIT_SETTINGS, rtol=1e-3)
+        simple, rich, comparison = fitting.compare_models([trace], settings=coarse)
+        assert comparison["choice"] in (comparison["simple"], comparison["rich"])
+        for line in comparison["report"]:  # the likelihoods, AIC, BIC and the decision
+            print(line)
+        ```
     """
     if simple is None:
         drive = _model.drive_of(traces[0], fit_kwargs.pop("drive", None))

@@ -684,14 +684,19 @@ def fit_traces(
 
     Args:
         traces: :class:`fitting.Trace` objects (``read_trace``).
-        spec: a :class:`ModelSpec`; or build one from ``drive`` (None: each trace's header),
-            ``layer`` ((H [m], ν, "bonded" | "frictionless") or None), ``viscoelastic`` and
-            ``fit_offset``.
+        spec: a :class:`ModelSpec`; or build one from ``drive``, ``layer``, ``viscoelastic``
+            and ``fit_offset``.
+        drive: the drive of the model built without ``spec`` (None: each trace's header).
+        layer: (H [m], ν, "bonded" | "frictionless") for a layer on a rigid base, or None
+            (a half-space).
+        viscoelastic: a standard linear solid instead of an elastic one.
+        fit_offset: also fit a constant offset of the response.
         shared: parameter names fitted once for all traces (a joint fit), e.g.
             ("E_star", "viscosity"); the others (z0, the offsets) are fitted per trace.
         method: "lm" (default), "trf" (scipy least_squares) or "lbfgs" (optax).
         settings: ``lubjax.Settings`` of the model (default ``fitting.FIT_SETTINGS``).
-        max_iter: iteration limit; tol: convergence tolerance on the Gauss–Newton decrement/s².
+        max_iter: iteration limit (a positive integer).
+        tol: convergence tolerance on the Gauss–Newton decrement/s² (> 0).
         starts: starting values per trace (default: :func:`initial_guess`).
         noise: "auto" (white unless the residuals are not), "white" or "ar1": the noise model
             of the covariance (:mod:`fitting._stats`).
@@ -704,6 +709,28 @@ def fit_traces(
         fixed: parameters held at known values, {name: SI value} (e.g. {"viscosity": 1e-3} when
             the medium is known): not fitted, their standard error 0; any of ``spec.names``
             except a shared one.
+
+    Returns:
+        One :class:`FitResult` per trace, in the order of ``traces``: the values and 1-σ
+        errors in SI units (E* [Pa], η [Pa s], z0 [m], ...), the statistics, the flags and the
+        model at the samples.
+
+    Raises:
+        ValueError: no traces, traces of different drives fitted together, an unknown
+            ``method``, ``noise``, ``batching`` or ``shared`` name, a ``max_iter``, ``tol``,
+            start or ``fixed`` value out of range (the message names the parameter).
+
+    Example:
+        ```python
+        import dataclasses
+        import fitting
+
+        trace = fitting.read_trace("data/paper_dc140.csv")
+        coarse = dataclasses.replace(fitting.FIT_SETTINGS, rtol=1e-3)
+        (res,) = fitting.fit_traces([trace], settings=coarse)
+        assert res.converged
+        E_star, eta = res.values["E_star"], res.values["viscosity"]  # Pa, Pa s
+        ```
     """
     _check_args(traces, method, max_iter, tol, starts)
     _sharding.batching_mode(batching)

@@ -821,8 +821,29 @@ def _read_fast(path: str, opts: dict) -> Trace | None:
 
 
 def read_trace(path, *, columns=None, units=None, force_sign: int = 1) -> Trace:
-    """Read a trace file (see module docstring for the format; ``columns``, ``units`` and
-    ``force_sign`` as :func:`parse_trace`)."""
+    """Read a trace file (see the module docstring of :mod:`fitting._io` for the format).
+
+    Args:
+        path: the file (CSV with ``# key: value`` metadata lines, a header and rows).
+        columns: which cells hold time, displacement and force, as :func:`parse_trace`.
+        units: units of the columns, as :func:`parse_trace` (converted to SI on reading).
+        force_sign: -1 flips the force, as :func:`parse_trace`.
+
+    Returns:
+        The :class:`Trace`, in SI units (s, m, N).
+
+    Raises:
+        TraceError: a folder, a file over ``MAX_FILE_BYTES``, a file that cannot be read, or
+            malformed contents (the message names the file, line and column); a ValueError.
+
+    Example:
+        ```python
+        import fitting
+
+        trace = fitting.read_trace("data/paper_dc140.csv")
+        assert trace.time.size == trace.force.size and trace.radius > 0
+        ```
+    """
     path = os.fspath(path)
     opts = _options(columns, units, force_sign)
     try:

@@ -41,21 +41,29 @@ class Settings:
     """Accuracy settings. ``rtol`` is *the* accuracy knob: it sets the time-step controller's
     tolerance and, unless given explicitly, the mesh (``dr``, ``mesh_growth``, ``length``).
 
+    The mesh of a run is :func:`lubjax.mesh_for` (its docstring says which refinement
+    ``make_plan``, ``sweep`` and the fits, whose one mesh serves a whole batch, leave out).
+
     Attributes:
-        rtol, atol: local error tolerance of every step on the film h̄ at each node,
-            |error| ≤ atol + rtol·|h̄|, on F̄, |error| ≤ 1e-12 + rtol·max(|F̄|,
-            force_floor × peak), and on a free gap z̄ (force control, spring, free sphere),
-            |error| ≤ atol + rtol·max|z̄ - z̄_start|. The global error is a few times rtol
-            (docs/accuracy.md).
-        dr: mesh spacing in the fine zone [0, r_fine] (default: from rtol).
-        r_fine: edge of the uniform fine zone (covers the Hertz radius √(1-z̄0) ≤ 1 and its rim).
-        length: domain length L̄ with p̄(L̄) = 0; force truncation ≈ 4z̄/L̄² (default: from rtol).
-        mesh_growth: cell-size ratio beyond r_fine (default: from rtol).
+        rtol: relative local error tolerance of every step (dimensionless, in [1e-10, 0.1]),
+            on the film h̄ at each node, |error| ≤ atol + rtol·|h̄|, on F̄, |error| ≤ 1e-12 +
+            rtol·max(|F̄|, force_floor × peak), and on a free gap z̄ (force control, spring,
+            free sphere), |error| ≤ atol + rtol·max|z̄ - z̄_start|. The global error is a few
+            times rtol (docs/accuracy.md).
+        atol: absolute local error tolerance on h̄ and on a free gap z̄ (units of d_c), in the
+            bounds of ``rtol``.
+        dr: mesh spacing Δr̄ in the fine zone [0, r_fine] (units of √(R d_c); default: from rtol).
+        r_fine: edge r̄ of the uniform fine zone (units of √(R d_c); covers the Hertz radius
+            √(1-z̄0) ≤ 1 and its rim).
+        length: domain length L̄ with p̄(L̄) = 0 (units of √(R d_c)); force truncation ≈ 4z̄/L̄²
+            (default: from rtol).
+        mesh_growth: cell-size ratio beyond r_fine (dimensionless; default: from rtol).
         order: 2 (BDF2, default), 1 (backward Euler, the paper's) or 3 (BDF3: fewer steps at
             tight tolerances; benchmarks/work_precision.py charts it).
         initial_step: first step at t̄_start and after each velocity jump, in units of
             min(1, 1/β) (the pressure's fast time scale).
-        max_steps: budget of attempted steps (accepted + rejected); running out is an error.
+        max_steps: budget of attempted steps (accepted + rejected, an integer ≥ 10); running
+            out is an error.
         force_floor: the force is held to rtol relative to max(|F̄|, force_floor × its peak
             so far): pointwise down to 1e-8 of the peak by default. Raise it where a tail far
             below the peak does not matter (fits of noisy data: fitting.FIT_SETTINGS uses 1e-5).
@@ -67,25 +75,36 @@ class Settings:
             films there less accurate (``Result.unresolved_film()`` says where).
         error_estimate: also run the nested coarse mesh (every other node) at rtol and at
             8·rtol, and return ``Result.force_error`` (about +55 % run time at the default).
-        contact_radius: refine the mesh around this r̄ (the Hertz contact's edge, where a
-            long hold drains through a thin neck) to what the neck a run ends with needs, at
-            most dr/rim_refinement (``NECK_ERROR``), and inside it to what the trapped film
-            h̄(0) needs, at most dr/contact_refinement (``DIMPLE_ERROR``) (:func:`relax`:
-            hardly any refinement for the default t̄ ≤ 5 run, the full factors for holds to
-            t̄ ~ 10³ at β ≳ 10³); 0 refines the axis (a
-            sphere that just touches); see
-            :func:`lubjax.graded_mesh`. "auto" (default): :func:`relax` takes the edge of the
-            contact the drive ends in, √(travel - z̄0) for a prescribed travel, √δ̄ of Hertz
-            under a load, the axis when the sphere stops within 50 dr² of the surface; none
-            for a spring, a free sphere, no contact, or a neck the refined cell cannot resolve
-            (h̄_min ≈ 0.3/√(β t̄_end) thinner than (dr/(4 rim_refinement))^{3/2}: β t̄_end >
-            6·10⁹ at the defaults; refining there only multiplied the steps). None: none.
-        rim_refinement, contact_refinement: the refinement factors (14 and 3: at β = 10³,
-            t̄ = 10³ they bring the late h̄_min to 0.3 % and h̄(0) to 0.5 %; 7 and 2 left
-            1.8 % and 1.3 %, benchmarks/accuracy.py).
+        contact_radius: refine the mesh around this r̄ (units of √(R d_c); the Hertz contact's
+            edge, where a long hold drains through a thin neck) to what the neck a run ends
+            with needs, at most dr/rim_refinement (``NECK_ERROR``), and inside it to what the
+            trapped film h̄(0) needs, at most dr/contact_refinement (``DIMPLE_ERROR``)
+            (:func:`relax`: hardly any refinement for the default t̄ ≤ 5 run, the full factors
+            for holds to t̄ ~ 10³ at β ≳ 10³); 0 refines the axis (a sphere that just
+            touches); see :func:`lubjax.graded_mesh`. "auto" (default): :func:`relax` takes
+            the edge of the contact the drive ends in, √(travel - z̄0) for a prescribed
+            travel, √δ̄ of Hertz under a load, the axis when the sphere stops within 50 dr² of
+            the surface; none for a spring, a free sphere, no contact, or a neck the refined
+            cell cannot resolve (h̄_min ≈ 0.3/√(β t̄_end) thinner than
+            (dr/(4 rim_refinement))^{3/2}: β t̄_end > 6·10⁹ at the defaults; refining there
+            only multiplied the steps). None: none. A number must lie in [0, r_fine).
+        rim_refinement: refinement factor at the contact's edge (default 14).
+        contact_refinement: refinement factor inside the contact (default 3). Together, at
+            β = 10³, t̄ = 10³, 14 and 3 bring the late h̄_min to 0.3 % and h̄(0) to 0.5 %; 7 and
+            2 left 1.8 % and 1.3 % (benchmarks/accuracy.py).
 
-    The mesh of a run is :func:`lubjax.mesh_for` (its docstring says which refinement
-    ``make_plan``, ``sweep`` and the fits, whose one mesh serves a whole batch, leave out).
+    Raises:
+        ValueError: a setting outside its range (the message names it and the range).
+
+    Example:
+        ```python
+        import lubjax
+
+        coarse = lubjax.Settings(rtol=1e-3, error_estimate=False)
+        dr, growth, length = coarse.mesh_parameters()  # the mesh rtol chose
+        assert dr > lubjax.Settings().mesh_parameters()[0]  # coarser than the default
+        res = lubjax.relax(100.0, 0.5, t_end=2.0, settings=coarse)
+        ```
     """
 
     rtol: float = DEFAULT_RTOL
@@ -223,9 +242,32 @@ def make_plan(
     The mesh is ``settings.mesh()``, one for every (β, z̄0) the plan serves: without the
     per-run refinement of :func:`relax` (:func:`lubjax.mesh_for` says what that changes).
 
-    ``history``: a prescribed travel (default ``RampHold()``); or ``drive``: any drive.
-    ``substrate``: ``HalfSpace()`` (default), ``Layer``, ``Viscoelastic``.
-    ``times``: where :func:`force_curve` reports F̄ (default 501 equally spaced times).
+    Args:
+        t_end: final time t̄ (units of t_c), after the drive's start.
+        history: a prescribed travel (default ``RampHold()``).
+        drive: instead of ``history``, any drive.
+        substrate: ``HalfSpace()`` (default), ``Layer``, ``Viscoelastic``.
+        settings: tolerance and mesh (default ``Settings()``).
+        times: where :func:`force_curve` reports F̄ (t̄, units of t_c; default 501 equally
+            spaced times from the drive's start to ``t_end``).
+
+    Returns:
+        The :class:`Plan`, the fixed (not differentiated) half of :func:`force_curve`'s inputs.
+
+    Raises:
+        ValueError: both ``history`` and ``drive``, a ``t_end`` not after the start, or
+            ``times`` outside [start, t_end] (the message names the parameter).
+
+    Example:
+        ```python
+        import lubjax
+        import numpy as np
+
+        plan = lubjax.make_plan(2.0, settings=lubjax.Settings(rtol=1e-3, error_estimate=False),
+                                times=np.linspace(0.0, 2.0, 21))
+        force = lubjax.force_curve(plan, 100.0, 0.5)
+        assert force.shape == (21,)
+        ```
     """
     history = _drive_of(history, drive)
     settings = Settings() if settings is None else settings
@@ -245,11 +287,32 @@ def force_curve(plan: Plan, beta, z0, times=None, *, mode: str = "reverse"):
     """F̄ at ``times`` (default ``plan.t``): a pure function of (β, z̄0) for ``jit``, ``vmap``,
     ``jax.grad``, ``jacfwd`` and ``jacrev``.
 
-    ``mode="reverse"`` (default) runs a checkpointed ``lax.scan`` over the plan's attempt budget
-    (``Settings.max_steps``), so reverse-mode AD works; finished attempts are skipped with
-    ``lax.cond``, but under ``vmap`` every batch member pays the whole budget, so for batched
-    forward-only use pass ``mode="forward"`` (a ``while_loop``: jvp/jacfwd and vmap, no vjp).
-    Times the run did not reach (budget exhausted) come back as NaN.
+    Args:
+        plan: mesh, tolerance, drive and output times (:func:`make_plan`).
+        beta: β (eq 8e), in [1e-4, 1e9]; a traced scalar.
+        z0: z̄0 = z0/d_c, in [1e-4, 1e3]; a traced scalar.
+        times: where to report F̄ (t̄, units of t_c; default ``plan.t``).
+        mode: "reverse" (default) runs a checkpointed ``lax.scan`` over the plan's attempt
+            budget (``Settings.max_steps``), so reverse-mode AD works; finished attempts are
+            skipped with ``lax.cond``, but under ``vmap`` every batch member pays the whole
+            budget, so for batched forward-only use pass "forward" (a ``while_loop``:
+            jvp/jacfwd and vmap, no vjp).
+
+    Returns:
+        F̄ at ``times`` (a jax array; dimensionless, as ``Result.force``). Times the run did not
+        reach (budget exhausted) come back as NaN.
+
+    Example:
+        ```python
+        import jax
+        import lubjax
+
+        plan = lubjax.make_plan(1.0, settings=lubjax.Settings(rtol=1e-3, error_estimate=False),
+                                times=[0.5, 1.0])
+        peak = lambda beta: lubjax.force_curve(plan, beta, 0.5)[-1]
+        dF_dbeta = jax.grad(peak)(100.0)  # sensitivity of F̄(t̄ = 1) to β
+        assert float(dF_dbeta) != 0.0
+        ```
     """
     times = plan.t if times is None else times
     traj = rollout(
@@ -456,9 +519,11 @@ def relax(
     """Simulate a relaxation test (paper eqs 8, 11b) in dimensionless form, error-controlled.
 
     Args:
-        beta: β (eq 8e), in [1e-4, 1e9]. z0: z̄0 = z0/d_c, in [1e-4, 1e3].
-        t_end: final time t̄ (t_c units). Steps grow as the solution slows: a hold to t̄ = 10⁶
-            costs ~1800 steps at β = 100, z̄0 = 0.5 (the neck at the contact edge keeps thinning).
+        beta: β (eq 8e), in [1e-4, 1e9].
+        z0: z̄0 = z0/d_c (the initial gap in units of d_c), in [1e-4, 1e3].
+        t_end: final time t̄ (units of t_c). Steps grow as the solution slows: a hold to
+            t̄ = 10⁶ costs ~1800 steps at β = 100, z̄0 = 0.5 (the neck at the contact edge keeps
+            thinning).
         history: indenter travel, ``RampHold()`` (eqs 8c,d; eq 23 with ``t_accel``) or
             ``SampledTravel`` (a measured history).
         drive: instead of ``history``, any drive: ``Travel(history)``, ``Load`` (force
@@ -466,13 +531,33 @@ def relax(
         substrate: ``HalfSpace()`` (default), ``Layer(thickness, poisson, interface)`` (a layer
             on a rigid base), ``Viscoelastic(...)`` (creep compliance; on either).
         settings: tolerance and mesh (defaults: see :class:`Settings`).
-        profile_times: times at which p̄, w̄, h̄ profiles are returned (by the stepper's
-            interpolant: the steps do not depend on them).
+        profile_times: times t̄ (units of t_c) at which p̄, w̄, h̄ profiles are returned (by the
+            stepper's interpolant: the steps do not depend on them).
         check: "raise" (default) raises SolverError on NaN, a negative film or a run that did
             not reach t_end; "warn" warns; "flag" only sets the flags of :class:`Result`.
         progress: None (quiet, the default), or a callable told each phase as it starts
             ("compiling the solver", "running the solver", "estimating the error"): the
             command line's progress line shows it.
+
+    Returns:
+        The :class:`Result`: F̄, the gap and min h̄ at every accepted step, the profiles at
+        ``profile_times``, the estimated errors (with ``Settings.error_estimate``) and the flags.
+
+    Raises:
+        ValueError: β, z̄0, ``t_end``, ``profile_times`` or ``check`` out of range (the message
+            names the parameter and its range), or both ``history`` and ``drive``.
+        SolverError: with ``check="raise"``, NaN, a negative film or a run that did not reach
+            ``t_end``.
+
+    Example:
+        ```python
+        import lubjax
+
+        res = lubjax.relax(100.0, 0.5, t_end=2.0, profile_times=[1.0],
+                           settings=lubjax.Settings(rtol=1e-3, error_estimate=False))
+        assert res.ok and res.film.shape == (1, res.r.size)
+        f_end = res.force[-1]  # F̄ at t̄ = 2, during the hold
+        ```
     """
     _check_x64()
     check_parameters(beta, z0)

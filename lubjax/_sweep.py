@@ -110,17 +110,48 @@ def sweep(
     """Run relaxation tests for all (β, z̄0) pairs (arrays broadcast together) in one compiled call.
 
     All runs share one mesh; each takes its own error-controlled steps and reports F̄ and min h̄
-    at the shared output ``times`` (default 501 equally spaced) by its own interpolant; any
-    ``drive`` (shared by the batch) instead of the travel ``history``, and any ``substrate``. The
-    batch is padded to a multiple of the device count and sharded across ``devices`` (default:
-    all of ``jax.devices()``; several CPU host devices need ``PJRT_NPROC`` > ``devices``,
-    lubjax/_sharding.py). ``batching``: how each device runs its pairs, "map" (one after another,
-    the default on CPU), "vmap" (all at once, the default on an accelerator; the batch then runs
-    until its slowest member is done) or "auto". Failed runs are flagged in ``ok`` rather than
-    raised, so one bad corner does not discard a map.
+    at the shared output ``times`` by its own interpolant. Failed runs are flagged in ``ok``
+    rather than raised, so one bad corner does not discard a map.
 
-    Example: a regime map over a grid, ``B, Z = np.meshgrid(betas, z0s); sweep(B, Z)``, then
-    ``res.force.reshape(*B.shape, -1)``.
+    Args:
+        beta: β (eq 8e), each in [1e-4, 1e9]; an array broadcast with ``z0``.
+        z0: z̄0 = z0/d_c, each in [1e-4, 1e3]; an array broadcast with ``beta``.
+        t_end: final time t̄ (units of t_c).
+        history: the prescribed travel (default ``RampHold()``).
+        drive: instead of ``history``, any drive (shared by the batch).
+        substrate: ``HalfSpace()`` (default), ``Layer``, ``Viscoelastic``.
+        settings: tolerance and mesh (default ``Settings()``).
+        devices: the batch is padded to a multiple of the device count and sharded across
+            this many devices (default: all of ``jax.devices()``; several CPU host devices
+            need ``PJRT_NPROC`` > ``devices``, lubjax/_sharding.py).
+        times: the shared output times t̄ (units of t_c; default 501 equally spaced).
+        batching: how each device runs its pairs, "map" (one after another, the default on
+            CPU), "vmap" (all at once, the default on an accelerator; the batch then runs
+            until its slowest member is done) or "auto".
+
+    Returns:
+        A :class:`SweepResult`: the flattened pairs, ``t``, ``force``, ``film_min`` and ``gap``
+        of shape (pairs, times), ``ok`` and the accepted steps per pair, the compile and run
+        times.
+
+    Raises:
+        ValueError: no pairs, a β or z̄0 out of range, or an unknown ``batching`` (the message
+            names the parameter).
+
+    Example:
+        A regime map over a grid: ``B, Z = np.meshgrid(betas, z0s); sweep(B, Z)``, then
+        ``res.force.reshape(*B.shape, -1)``.
+
+        ```python
+        import lubjax
+        import numpy as np
+
+        B, Z = np.meshgrid([10.0, 100.0], [0.5, 1.0])
+        res = lubjax.sweep(B, Z, 1.0, times=np.linspace(0.0, 1.0, 11),
+                           settings=lubjax.Settings(rtol=1e-3, error_estimate=False))
+        force = res.force.reshape(*B.shape, -1)  # (z0s, betas, times)
+        assert res.ok.all() and force.shape == (2, 2, 11)
+        ```
     """
     _check_x64()
     b, z = np.broadcast_arrays(np.asarray(beta, np.float64), np.asarray(z0, np.float64))
