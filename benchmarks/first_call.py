@@ -86,7 +86,7 @@ def main(argv=None):
     if args.no_estimate:
         command += " --no-estimate"
     lines = [
-        f"# A fresh process's first relax(100, 0.5, {args.t_end:g}), by revision ({describe()})",
+        f"# A fresh process's first relax(100, 0.5, {args.t_end:g}), by revision ({_harness.label()})",
         "",
         f"`{command}`: "
         + ("each revision's defaults but Settings(error_estimate=False) where it exists"
