@@ -48,7 +48,7 @@ print(json.dumps(dict(import_s=imported - start, compile_s=first.compile_s,
 
 
 def main(argv=None):
-    from benchmarks._harness import describe, median_range, write_report
+    from benchmarks._harness import label, median_range, write_report
 
     ap = _harness.parser(__doc__)
     ap.add_argument("revisions", nargs="+")
@@ -86,7 +86,7 @@ def main(argv=None):
     if args.no_estimate:
         command += " --no-estimate"
     lines = [
-        f"# A fresh process's first relax(100, 0.5, {args.t_end:g}), by revision ({_harness.label()})",
+        f"# A fresh process's first relax(100, 0.5, {args.t_end:g}), by revision ({label()})",
         "",
         f"`{command}`: "
         + ("each revision's defaults but Settings(error_estimate=False) where it exists"
