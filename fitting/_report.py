@@ -32,11 +32,27 @@ _TRUE_KEYS = {
 }
 
 
+#: Display units by magnitude: (smallest magnitude shown in it, unit, scale), largest first.
+_E_DISPLAY = ((1e6, "MPa", 1e6), (1e3, "kPa", 1e3), (0.0, "Pa", 1.0))
+_FORCE_DISPLAY = ((1e-3, "mN", 1e-3), (1e-6, "uN", 1e-6), (0.0, "nN", 1e-9))
+
+
+def _by_magnitude(magnitude, table):
+    return next((unit, scale) for lowest, unit, scale in table if magnitude >= lowest)
+
+
 def units(res: FitResult, name: str):
-    """(JSON key, display unit, display scale) of parameter ``name``."""
+    """(JSON key, display unit, display scale) of parameter ``name``: E* in MPa, kPa or Pa and
+    a force offset in mN, uN or nN, whichever its size reads best in (a gel on an AFM is 100 Pa
+    and 1 nN; the paper's tribometer 4 MPa and 30 mN)."""
     if name == "offset":
-        return ("offset_N", "mN", 1e-3) if res.spec.response == "force" else (
-            "offset_m", "um", 1e-6)
+        if res.spec.response != "force":
+            return "offset_m", "um", 1e-6
+        size = max(abs(res.values[name]), abs(res.stderr[name]))
+        return ("offset_N", *_by_magnitude(size if np.isfinite(size) else 1.0, _FORCE_DISPLAY))
+    if name == "E_star":
+        size = abs(res.values[name])
+        return ("E_star_Pa", *_by_magnitude(size if np.isfinite(size) else 1e6, _E_DISPLAY))
     return _UNITS[name]
 
 

@@ -128,9 +128,25 @@ def test_units_are_not_repeated_and_offsets_get_no_relative_error():
     assert short_value(res, "E_star") == "3.9 ± 0.05 MPa"
     report = fit_report(res)
     rows = {ln.split()[0]: ln for ln in report.splitlines() if " +/- " in ln}
-    assert "%" not in rows["offset"] and "mN" in rows["offset"]  # absolute error only
+    # absolute error only, in the unit its size reads best in (22 uN here)
+    assert "%" not in rows["offset"] and " uN " in rows["offset"]
     assert "(1.28%)" in rows["E_star"]  # scale parameters keep their relative error
     assert "E0/Einf" not in rows["stiffening"] and "stiffening = E0/Einf" in report
+
+
+def test_display_units_follow_the_size_of_the_value():
+    """A gel on an AFM (E* ~ 100 Pa, forces of nN) is not printed as 0.0001 MPa."""
+    from fitting._report import units
+
+    res = _fit_result(VISCO)
+    soft = res._replace(values={**res.values, "E_star": 106.0, "offset": 2e-10},
+                        stderr={**res.stderr, "E_star": 1.0, "offset": 5e-11})
+    assert units(soft, "E_star") == ("E_star_Pa", "Pa", 1.0)
+    assert units(soft, "offset") == ("offset_N", "nN", 1e-9)
+    assert short_value(soft, "E_star") == "106 ± 1 Pa"
+    mid = res._replace(values={**res.values, "E_star": 2.5e4})
+    assert units(mid, "E_star")[1] == "kPa"
+    assert units(res, "E_star")[1] == "MPa"
 
 
 def test_joint_fit_reports_one_start_for_a_shared_parameter():
