@@ -654,6 +654,28 @@ def _spec_for(traces, spec, drive, substrate_kw):
     return ModelSpec(drive=drives.pop(), **substrate_kw)
 
 
+def _prepare(traces, spec, shared, fixed, starts):
+    """(fixed, scales, starts) of a fit, checked: the shared and fixed names, each trace's scales,
+    the starting values (:func:`initial_guess` where not given, fixed values put in), every one
+    positive where θ takes its logarithm."""
+    unknown = [n for n in shared if n not in spec.names or n == "offset"]
+    if unknown:
+        allowed = ", ".join(n for n in spec.names if n != "offset")
+        raise ValueError(f"shared: unknown parameter(s) {', '.join(unknown)} (allowed: {allowed})")
+    fixed = _check_fixed(fixed, spec, shared)
+    scales = [_model.scales_from_trace(tr, spec.drive) for tr in traces]
+    if starts is None:
+        starts = [initial_guess(tr, s, spec) for tr, s in zip(traces, scales, strict=True)]
+    if fixed:
+        note = "held fixed: " + ", ".join(f"{n} = {v:g}" for n, v in fixed.items())
+        starts = [Start({**st.values, **fixed}, (*st.notes, note)) for st in starts]
+    for tr, st in zip(traces, starts, strict=True):  # θ holds logarithms: no value <= 0 gets in
+        for n in spec.names:
+            if n != "stiffening":  # θ clamps E0/E∞ - 1 at 1e-6 (an elastic start is fine)
+                _check_value(n, st.values.get(n), f"{tr.name or 'trace'}: starting value")
+    return fixed, scales, starts
+
+
 def fit_traces(
     traces: list[Trace],
     *,
@@ -738,23 +760,9 @@ def fit_traces(
     spec = _spec_for(traces, spec, drive,
                      dict(layer=layer, viscoelastic=viscoelastic, fit_offset=fit_offset))
     shared = tuple(shared)
-    unknown = [n for n in shared if n not in spec.names or n == "offset"]
-    if unknown:
-        allowed = ", ".join(n for n in spec.names if n != "offset")
-        raise ValueError(f"shared: unknown parameter(s) {', '.join(unknown)} (allowed: {allowed})")
     if noise not in _stats.NOISE_MODELS:
         raise ValueError(f"noise must be one of {', '.join(_stats.NOISE_MODELS)}, got {noise!r}")
-    fixed = _check_fixed(fixed, spec, shared)
-    scales = [_model.scales_from_trace(tr, spec.drive) for tr in traces]
-    if starts is None:
-        starts = [initial_guess(tr, s, spec) for tr, s in zip(traces, scales, strict=True)]
-    if fixed:
-        note = "held fixed: " + ", ".join(f"{n} = {v:g}" for n, v in fixed.items())
-        starts = [Start({**st.values, **fixed}, (*st.notes, note)) for st in starts]
-    for tr, st in zip(traces, starts, strict=True):  # θ holds logarithms: no value <= 0 gets in
-        for n in spec.names:
-            if n != "stiffening":  # θ clamps E0/E∞ - 1 at 1e-6 (an elastic start is fine)
-                _check_value(n, st.values.get(n), f"{tr.name or 'trace'}: starting value")
+    fixed, scales, starts = _prepare(traces, spec, shared, fixed, starts)
     groups = [list(range(len(traces)))] if shared else [[t] for t in range(len(traces))]
     t0 = time.perf_counter()
     solver = _model.make_solver(settings)
