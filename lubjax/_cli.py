@@ -428,32 +428,47 @@ def read_load_csv(path):
     return t, f
 
 
-def _drive_json(res, scales, z0_m):
-    d = scales["gap_m"]
-    return {
+def _result_json(res, test=None, z0_m=None):
+    """The JSON every ``lubjax`` command writes: the dimensionless series with their error
+    estimates and the run's cost; given ``test`` (its scales), the same in SI units; given
+    ``z0_m`` (the starting gap [m] of a drive), the sphere's position and approach too."""
+    out = {
         "beta": res.beta,
         "z0": res.z0,
         "t": res.t.tolist(),
-        "gap": res.gap.tolist(),
         "force": res.force.tolist(),
         "h_min": res.film_min.tolist(),
         "h_center": res.film_center.tolist(),
-        "t_s": (res.t * scales["time_s"]).tolist(),
-        "gap_m": (res.gap * d).tolist(),
-        "approach_m": (z0_m - res.gap * d).tolist(),
-        "force_N": (res.force * scales["force_N"]).tolist(),
-        "h_min_m": (res.film_min * d).tolist(),
-        "h_center_m": (res.film_center * d).tolist(),
-        "gap_error_m": (res.gap_error * d).tolist(),
-        "force_error_N": (res.force_error * scales["force_N"]).tolist(),
-        "h_min_error_m": (res.film_min_error * d).tolist(),
+        "force_error": res.force_error.tolist(),
+        "h_min_error": res.film_min_error.tolist(),
+        "h_center_error": res.film_center_error.tolist(),
         "steps": res.accepted,
         "rejected_steps": res.rejected,
         "run_s": res.run_s,
         "compile_s": res.compile_s,
         "ok": res.ok,
-        "scales": scales,
     }
+    if test is None:
+        return out
+    scales = test.scales
+    d, f = scales["gap_m"], scales["force_N"]  # d_c, and the force scale
+    out.update(
+        t_s=(res.t * scales["time_s"]).tolist(),
+        force_N=(res.force * f).tolist(),
+        h_min_m=(res.film_min * d).tolist(),
+        h_center_m=(res.film_center * d).tolist(),
+        force_error_N=(res.force_error * f).tolist(),
+        h_min_error_m=(res.film_min_error * d).tolist(),
+        scales=scales,
+    )
+    if z0_m is not None:
+        out.update(
+            gap=res.gap.tolist(),
+            gap_m=(res.gap * d).tolist(),
+            approach_m=(z0_m - res.gap * d).tolist(),
+            gap_error_m=(res.gap_error * d).tolist(),
+        )
+    return out
 
 
 def _creep(args) -> int:
@@ -498,7 +513,7 @@ def _creep(args) -> int:
         res = relax(test.beta, test.z0_bar, t_end, drive=test.drive(history),
                     settings=settings, profile_times=profile_times, substrate=substrate,
                     progress=phase)
-    out = _drive_json(res, test.scales, test.gap)
+    out = _result_json(res, test, z0_m=test.gap)
     out.update(load_N=test.load, hertz_indentation_m=test.indent,
                settings=dataclasses.asdict(settings), substrate=record)
     d = test.indent
@@ -509,7 +524,7 @@ def _creep(args) -> int:
         f"film h(0) {res.film_center[-1] * d:.3g} m; {res.accepted} steps, run {res.run_s:.3f} s,"
         f" compile {res.compile_s:.2f} s"
     )
-    _write(args, out, res, "creep", test, line)
+    _write(args, out, lambda path: _plot_drive(res, path, "creep", test, line))
     return 0
 
 
@@ -553,7 +568,7 @@ def _bounce(args) -> int:
                                       pressure=again.pressure, displacement=again.displacement,
                                       film=again.film)
     e = restitution(res)
-    out = _drive_json(res, test.scales, test.gap)
+    out = _result_json(res, test, z0_m=test.gap)
     v = test.speed
     out.update(
         velocity=res.velocity.tolist(),
@@ -567,7 +582,8 @@ def _bounce(args) -> int:
         substrate=record,
     )
     print(bounce_summary(res, test, e))
-    _write(args, out, res, "bounce", test, line, ["impact: peak force", "end"])
+    _write(args, out, lambda path: _plot_drive(res, path, "bounce", test, line,
+                                               ["impact: peak force", "end"]))
     return 0
 
 
@@ -591,16 +607,28 @@ def bounce_summary(res, test, e) -> str:
     )
 
 
-def _write(args, out, res, kind, test, substrate, notes=None):
+def _write(args, out, plot):
+    """The one writer of every ``lubjax`` command: the JSON ``out`` to --out (atomically), then
+    ``plot(path)`` to --plot."""
     if args.out:
         with atomic_open(args.out, "w") as f:
             json.dump(out, f)
         print(f"wrote {args.out}")
     if args.plot:
-        from ._plotting import plot_drive
-
-        plot_drive(res, args.plot, kind, test, substrate=substrate, profile_notes=notes)
+        plot(args.plot)
         print(f"wrote {args.plot}")
+
+
+def _plot_drive(res, path, kind, test, substrate, notes=None):
+    from ._plotting import plot_drive
+
+    plot_drive(res, path, kind, test, substrate=substrate, profile_notes=notes)
+
+
+def _plot_relax(res, path, test, substrate):
+    from ._plotting import plot_result
+
+    plot_result(res, path, test=test, substrate=substrate)
 
 
 def _dispatch(args) -> int:
@@ -682,33 +710,8 @@ def _relax(args) -> int:
     with progress_line("relax") as phase:
         res = relax(beta, z0, t_end, settings=settings, profile_times=profile_times,
                     substrate=substrate, progress=phase)
-    out = {
-        "beta": beta,
-        "z0": z0,
-        "t": res.t.tolist(),
-        "force": res.force.tolist(),
-        "h_min": res.film_min.tolist(),
-        "h_center": res.film_center.tolist(),
-        "run_s": res.run_s,
-        "compile_s": res.compile_s,
-        "force_error": res.force_error.tolist(),
-        "h_min_error": res.film_min_error.tolist(),
-        "h_center_error": res.film_center_error.tolist(),
-        "steps": res.accepted,
-        "rejected_steps": res.rejected,
-        "ok": res.ok,
-        "settings": dataclasses.asdict(settings),
-        "substrate": record,
-    }
-    if test:
-        out.update(
-            t_s=(res.t * test.time_scale).tolist(),
-            force_N=(res.force * test.force_scale).tolist(),
-            h_min_m=(res.film_min * test.indent).tolist(),
-            h_center_m=(res.film_center * test.indent).tolist(),
-            force_error_N=(res.force_error * test.force_scale).tolist(),
-            scales={k: test.scales[k] for k in ("time_s", "force_N", "length_m", "pressure_Pa")},
-        )
+    out = _result_json(res, test)
+    out.update(settings=dataclasses.asdict(settings), substrate=record)
     if line:
         print(f"substrate: {line}")
     print(relax_summary(res, test))
@@ -718,15 +721,7 @@ def _relax(args) -> int:
             note += (f" (t̄ = t/t_c, t_c = {test.time_scale:.4g} s; h̄ = h/d_c, "
                      f"d_c = {test.indent:.4g} m)")
         print(f"note: {note}")
-    if args.out:
-        with atomic_open(args.out, "w") as f:
-            json.dump(out, f)
-        print(f"wrote {args.out}")
-    if args.plot:
-        from ._plotting import plot_result
-
-        plot_result(res, args.plot, test=test, substrate=line)
-        print(f"wrote {args.plot}")
+    _write(args, out, lambda path: _plot_relax(res, path, test, line))
     return 0
 
 
