@@ -61,3 +61,12 @@ def test_layer_options_without_a_layer_are_refused_by_both(argv, capsys):
     assert f"{argv[0]}: only with --substrate layer" in capsys.readouterr().err
     assert fcli.main(["trace.csv", *argv])  # refused before reading it == 2
     assert f"{argv[0]}: only with --substrate layer" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["creep", "bounce"])
+def test_the_drives_take_the_accuracy_options(command):
+    args = lcli._parser().parse_args([command, "--rtol", "1e-5", "--order", "3",
+                                      "--max-steps", "500"])
+    settings = lcli._settings(args)
+    assert (settings.rtol, settings.order, settings.max_steps) == (1e-5, 3, 500)
+    assert lcli._settings(lcli._parser().parse_args([command])) == lubjax.Settings()
