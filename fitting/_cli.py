@@ -19,24 +19,34 @@ import json
 import os
 import shutil
 import sys
+import textwrap
 import time
 
 import numpy as np
 
-from lubjax._cli import example_lines
+from lubjax._cli_options import (
+    accuracy_settings,
+    add_accuracy_options,
+    add_cache_flag,
+    add_debug_flag,
+    add_substrate_options,
+    check_substrate_options,
+    example_lines,
+    layer_base,
+    layer_poisson,
+    positive_float,
+    positive_int,
+)
 from lubjax._files import (
     EXIT_EPILOG,
     EXIT_FAILED,
     EXIT_OK,
     Parser,
     UsageError,
-    add_debug_flag,
     atomic_open,
     check_distinct_inputs,
     check_outputs,
     plot_format,
-    positive_float,
-    positive_int,
     prepare_outputs,
     run_cli,
     save_figure,
@@ -48,7 +58,7 @@ from ._checks import e_star_range, plausibility_flags
 from ._compare import compare_models
 from ._fit import METHODS, FitResult, fit_traces, initial_guess
 from ._io import parse_columns, parse_units, read_trace
-from ._model import DRIVES, FIT_SETTINGS, LAYER_BASES, ModelSpec, scales_from_trace
+from ._model import DRIVES, FIT_SETTINGS, ModelSpec, scales_from_trace
 from ._report import fit_report, result_to_dict, short_value
 
 PROG = "lubjax-fit"
@@ -282,15 +292,9 @@ def _add_model_options(p) -> None:
         "stiffness '# stiffness_N_m:'); default: the trace's '# drive:' header, else spring "
         "when it gives a stiffness, else travel",
     )
-    p.add_argument("--substrate", choices=("halfspace", "layer", "viscoelastic"),
-                   default="halfspace", help="elastic half-space (default), a layer of "
-                   "thickness --thickness on a rigid base, or a viscoelastic half-space (one "
-                   "Prony term: E0/Einf and tau fitted)")
-    p.add_argument("--thickness", type=positive_float, help="layer thickness H [m] (known)")
-    p.add_argument("--layer-base", choices=LAYER_BASES, default="bonded",
-                   help="layer on its rigid base: bonded (default) or frictionless")
-    p.add_argument("--layer-poisson", type=float, default=0.5,
-                   help="Poisson ratio of the layer (default 0.5)")
+    add_substrate_options(p.add_argument_group("substrate", textwrap.fill(
+        "A layer of known thickness on a rigid base, or a viscoelastic half-space: one Prony "
+        "term, E0/Einf and tau fitted.", 76)))
     p.add_argument("--compare", action="store_true",
                    help="also fit the other model and report which one the data ask for "
                    "(likelihood ratio, AIC, BIC): with --substrate layer the half-space "
@@ -315,32 +319,19 @@ def _add_fit_options(p) -> None:
     """The optimiser, the noise model and the solver's accuracy."""
     p.add_argument("--method", choices=METHODS, default="lm",
                    help="optimiser: Levenberg-Marquardt (default), trf (scipy least_squares) "
-                   "or lbfgs (optax)")
+                   "or lbfgs (optax; it can need a tighter --rtol: a smoother model)")
     p.add_argument("--noise", choices=("auto", "white", "ar1"), default="auto",
                    help="noise model of the errors: auto (AR(1) when the residuals are not "
                    "white; default), white, ar1")
     p.add_argument("--max-iter", type=positive_int, default=60, help="iteration limit (default 60)")
-    p.add_argument("--rtol", type=positive_float, default=None,
-                   help="the model's accuracy: local error tolerance of each step, and the mesh "
-                        f"(lubjax Settings.rtol; default {FIT_SETTINGS.rtol:g}). "
-                        "Tighter is slower and smoother in the parameters, which --method "
-                        "lbfgs can need")
-    p.add_argument("--order", type=int, choices=(1, 2, 3), default=None,
-                   help="the model's time integrator: 2 (BDF2, default), 3 (BDF3: fewer steps "
-                        "at tight --rtol) or 1 (backward Euler) (lubjax Settings.order)")
-    p.add_argument("--no-cache", action="store_true",
-                   help="do not use the persistent compilation cache (also LUBJAX_CACHE=0)")
+    add_accuracy_options(p, FIT_SETTINGS, max_steps=False)
+    add_cache_flag(p)
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
 
 
 def _spec_options(args, n_traces):
     """ModelSpec keyword arguments and shared names from the options (UsageError if bad)."""
-    if args.thickness is not None and args.substrate != "layer":
-        raise UsageError("--thickness: only with --substrate layer")
-    if args.substrate == "layer" and args.thickness is None:
-        raise UsageError("--substrate layer needs --thickness H (metres)")
-    if not -1.0 < args.layer_poisson <= 0.5:
-        raise UsageError(f"--layer-poisson must be in (-1, 0.5], got {args.layer_poisson:g}")
+    check_substrate_options(args, layer_under_viscoelastic=False)
     if args.compare and args.substrate == "viscoelastic":
         raise UsageError("--compare fits the viscoelastic model itself: leave out --substrate "
                          "viscoelastic")
@@ -356,7 +347,7 @@ def _spec_options(args, n_traces):
         if any(x in ("stiffening", "relaxation_time") for x in shared) and (
                 args.substrate != "viscoelastic"):
             raise UsageError("--shared stiffening/relaxation_time need --substrate viscoelastic")
-    layer = (args.thickness, args.layer_poisson, args.layer_base) if args.thickness else None
+    layer = (args.thickness, layer_poisson(args), layer_base(args)) if args.thickness else None
     return dict(layer=layer, viscoelastic=args.substrate == "viscoelastic",
                 fit_offset=not args.no_offset), shared
 
@@ -403,7 +394,7 @@ def _run(args) -> int:
     check_distinct_inputs(args.traces, "trace")
     spec_kw, shared = _spec_options(args, len(args.traces))
     # Settings checks the range itself (a ValueError: one line, exit 2, before any fitting)
-    accuracy = {k: v for k, v in (("rtol", args.rtol), ("order", args.order)) if v is not None}
+    accuracy = accuracy_settings(args)
     settings = dataclasses.replace(FIT_SETTINGS, **accuracy) if accuracy else None
     plots = []
     if args.plot is not None:

@@ -19,16 +19,26 @@ import time
 
 import numpy as np
 
-from . import _checks
+from ._cli_options import (
+    accuracy_settings,
+    add_accuracy_options,
+    add_cache_flag,
+    add_debug_flag,
+    add_substrate_options,
+    check_substrate_options,
+    example_lines,
+    layer_base,
+    layer_poisson,
+    option_name,
+    positive_float,
+)
 from ._files import (
     EXIT_EPILOG,
     MAX_TRAVEL_OVER_RADIUS,
     Parser,
     UsageError,
-    add_debug_flag,
     atomic_open,
     check_outputs,
-    positive_float,
     prepare_outputs,
     run_cli,
 )
@@ -70,24 +80,6 @@ EXAMPLES = {
 }
 
 
-def example_lines(command: str, width: int = 76) -> str:
-    """``command`` as shell lines of at most ``width`` columns (where an option and its value
-    fit), continued with backslashes, never splitting an option from its value."""
-    groups = []
-    for word in command.split():
-        if word.startswith("--") or not groups:
-            groups.append(word)
-        else:
-            groups[-1] += " " + word
-    lines = [groups[0]]
-    for group in groups[1:]:
-        if len(lines[-1]) + 1 + len(group) + 2 > width - 6:
-            lines.append(group)
-        else:
-            lines[-1] += " " + group
-    return " \\\n      ".join(lines)
-
-
 def _epilog(command: str) -> str:
     """The exit statuses, then runnable examples (the last thing --help shows)."""
     examples = "\n".join(f"  {example_lines(line)}" for line in EXAMPLES[command])
@@ -95,7 +87,6 @@ def _epilog(command: str) -> str:
 
 
 SI_NAMES = ("E_star", "E", "poisson", "viscosity", "radius", "speed", "indent", "gap")
-LAYER_BASES = _checks.LAYER_BASES
 
 
 #: A run shorter than this shows no progress line; the line is redrawn this often.
@@ -144,21 +135,13 @@ def progress_line(what: str, stream=None):
             stream.flush()
 
 
-def _add_cache_flag(parser) -> None:
-    parser.add_argument(
-        "--no-cache", action="store_true",
-        help="do not use the persistent compilation cache (also LUBJAX_CACHE=0; where it is: "
-        "$LUBJAX_CACHE_DIR, else ~/.cache/lubjax/jax)",
-    )
-
-
 def _parser() -> Parser:
     p = Parser(prog=PROG, description=DESCRIPTION, epilog=_epilog("lubjax"))
     add_debug_flag(p)
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in (_add_relax_command, _add_creep_command, _add_bounce_command):
         command = add(sub)
-        _add_cache_flag(command)
+        add_cache_flag(command)
         add_debug_flag(command)
     return p
 
@@ -193,18 +176,7 @@ def _add_relax_command(sub):
     r.add_argument(
         "--dr", type=positive_float, default=None, help="fine-zone mesh spacing (Settings.dr)"
     )
-    r.add_argument(
-        "--rtol", type=positive_float, default=None,
-        help="accuracy: local error tolerance of each step, and the mesh (Settings.rtol, "
-        "default 1e-4)",
-    )
-    r.add_argument(
-        "--max-steps", type=int, default=None, help="attempted-step budget (Settings.max_steps)"
-    )
-    r.add_argument("--order", type=int, choices=(1, 2, 3), default=None,
-                   help="1: backward Euler, 2: BDF2 (default), 3: BDF3")
-    r.add_argument("--out", help="write results as JSON here")
-    r.add_argument("--plot", help="write a force / film figure here (.png, .pdf, .svg, ...)")
+    _add_accuracy(r)
     return r
 
 
@@ -264,16 +236,14 @@ def _add_material(p):
 
 
 def _add_accuracy(p):
-    p.add_argument("--rtol", type=positive_float, default=None,
-                   help="accuracy: local error tolerance (Settings.rtol, default 1e-4)")
-    p.add_argument("--max-steps", type=int, default=None,
-                   help="attempted-step budget (Settings.max_steps)")
+    """The solver's accuracy options and the outputs (every command)."""
+    from ._solve import Settings
+
+    add_accuracy_options(p, Settings())
     p.add_argument("--out", help="write results as JSON here")
     p.add_argument("--plot", help="write a figure here (.png, .pdf, .svg, ...)")
 
 
-SUBSTRATES = ("halfspace", "layer", "viscoelastic")
-LAYER_OPTIONS = ("thickness", "layer_base", "layer_poisson")
 PRONY_OPTIONS = ("prony_g", "prony_tau")
 
 
@@ -284,30 +254,18 @@ def _add_substrate(p, dimensionless=False):
                  else "[s]")
     # the parser keeps descriptions as written (RawDescriptionHelpFormatter): wrap it here
     g = p.add_argument_group("substrate", textwrap.fill(
+        f"A layer{si_only} on its base, or a viscoelastic solid given by its Prony series "
+        "(--prony-g, --prony-tau; on the layer if --thickness is given). "
         "The solver scales with the relaxed modulus: for a viscoelastic substrate E* (--E-star, "
         "or --E with --poisson) is the relaxed E*∞, the long-time modulus, and the Prony series "
         "E(t)/E∞ = 1 + Σ g_k exp(-t/τ_k) gives the instantaneous E*0 = E*∞ (1 + Σ g_k).",
         76))
-    g.add_argument("--substrate", choices=SUBSTRATES, default="halfspace",
-                   help="elastic half-space (default), a layer of thickness --thickness on a rigid "
-                   f"base{si_only}, or a viscoelastic solid (--prony-g, --prony-tau; on the layer "
-                   "if --thickness is given)")
-    g.add_argument("--thickness", type=positive_float,
-                   help="layer thickness H [m] (H/sqrt(R d_c) in the solver's units)")
-    g.add_argument("--layer-base", choices=LAYER_BASES, default=None,
-                   help="layer on its rigid base: bonded (default) or frictionless")
-    g.add_argument("--layer-poisson", type=float, default=None,
-                   help="Poisson ratio of the layer in (-1, 0.5] (default: --poisson if "
-                   "given, else 0.5)")
+    add_substrate_options(g)
     g.add_argument("--prony-g", metavar="G1[,G2...]", default=None,
                    help="Prony modulus weights g_k = E_k/E∞ > 0 (dimensionless, relative to the "
                    "relaxed modulus; E0/E∞ = 1 + sum)")
     g.add_argument("--prony-tau", metavar="TAU1[,TAU2...]", default=None,
                    help=f"Prony relaxation times τ_k > 0, distinct, one per weight, {tau_units}")
-
-
-def _option(name):
-    return "--" + name.replace("_", "-")
 
 
 def _prony_list(args, name, what):
@@ -318,10 +276,10 @@ def _prony_list(args, name, what):
         try:
             v = float(cell)
         except ValueError:
-            raise UsageError(f"{_option(name)}: term {k} is not a number: {cell.strip()!r} "
+            raise UsageError(f"{option_name(name)}: term {k} is not a number: {cell.strip()!r} "
                              f"(give {what}, comma-separated)") from None
         if not (math.isfinite(v) and v > 0):
-            raise UsageError(f"{_option(name)}: term {k} must be a finite number > 0 ({what}), "
+            raise UsageError(f"{option_name(name)}: term {k} must be a finite number > 0 ({what}), "
                              f"got {cell.strip()}")
         values.append(v)
     return values
@@ -336,23 +294,15 @@ def _substrate(args, settings, scale):
     from ._substrate import Layer, Viscoelastic
 
     kind = args.substrate
-    layer_given = [_option(n) for n in LAYER_OPTIONS if getattr(args, n) is not None]
-    prony_given = [_option(n) for n in PRONY_OPTIONS if getattr(args, n) is not None]
-    if kind == "halfspace" and layer_given:
-        raise UsageError(f"{', '.join(layer_given)}: only with --substrate layer (or "
-                         "viscoelastic on a layer)")
+    check_substrate_options(args, layer_under_viscoelastic=True)
+    prony_given = [option_name(n) for n in PRONY_OPTIONS if getattr(args, n) is not None]
     if kind != "viscoelastic" and prony_given:
         raise UsageError(f"{', '.join(prony_given)}: only with --substrate viscoelastic")
-    if kind == "layer" and args.thickness is None:
-        raise UsageError("--substrate layer needs --thickness H (metres)")
     if kind == "viscoelastic":
-        missing = [_option(n) for n in PRONY_OPTIONS if getattr(args, n) is None]
+        missing = [option_name(n) for n in PRONY_OPTIONS if getattr(args, n) is None]
         if missing:
             raise UsageError("--substrate viscoelastic needs " + " and ".join(missing)
                              + " (--prony-g G1[,G2...] --prony-tau TAU1[,TAU2...])")
-        if layer_given and args.thickness is None:
-            raise UsageError(f"{', '.join(layer_given)}: with --substrate viscoelastic only "
-                             "together with --thickness (the layer under the viscoelastic solid)")
 
     layer, record, line = None, {"kind": "halfspace"}, None
     if args.thickness is not None:
@@ -360,15 +310,8 @@ def _substrate(args, settings, scale):
             raise UsageError("--thickness is in metres: give the SI parameters (--E-star, "
                              "--viscosity, --radius, --speed, --indent, --gap), not --beta/--z0")
         radius, d_c, _ = scale
-        nu = args.layer_poisson
-        if nu is None:
-            nu = args.poisson if args.poisson is not None else 0.5
-        try:
-            _checks.check_poisson("--layer-poisson", nu)
-        except ValueError:
-            raise UsageError(f"--layer-poisson must be in (-1, 0.5], got {nu:g}") from None
-        layer = Layer(layer_thickness_bar(args.thickness, radius, d_c), nu,
-                      args.layer_base or "bonded")
+        layer = Layer(layer_thickness_bar(args.thickness, radius, d_c), layer_poisson(args),
+                      layer_base(args))
         try:  # the matrix's cost depends on the mesh length only: refuse a too thin layer now
             k_nodes(settings.mesh(), layer.thickness, layer.poisson, layer.interface)
         except ValueError as exc:
@@ -441,8 +384,7 @@ def _check_thin(name, value, radius):
 def _settings(args):
     from ._solve import Settings
 
-    given = [("rtol", args.rtol), ("max_steps", args.max_steps)]
-    return Settings(**{k: v for k, v in given if v is not None})
+    return Settings(**accuracy_settings(args))
 
 
 def read_load_csv(path):
@@ -486,32 +428,47 @@ def read_load_csv(path):
     return t, f
 
 
-def _drive_json(res, scales, z0_m):
-    d = scales["gap_m"]
-    return {
+def _result_json(res, test=None, z0_m=None):
+    """The JSON every ``lubjax`` command writes: the dimensionless series with their error
+    estimates and the run's cost; given ``test`` (its scales), the same in SI units; given
+    ``z0_m`` (the starting gap [m] of a drive), the sphere's position and approach too."""
+    out = {
         "beta": res.beta,
         "z0": res.z0,
         "t": res.t.tolist(),
-        "gap": res.gap.tolist(),
         "force": res.force.tolist(),
         "h_min": res.film_min.tolist(),
         "h_center": res.film_center.tolist(),
-        "t_s": (res.t * scales["time_s"]).tolist(),
-        "gap_m": (res.gap * d).tolist(),
-        "approach_m": (z0_m - res.gap * d).tolist(),
-        "force_N": (res.force * scales["force_N"]).tolist(),
-        "h_min_m": (res.film_min * d).tolist(),
-        "h_center_m": (res.film_center * d).tolist(),
-        "gap_error_m": (res.gap_error * d).tolist(),
-        "force_error_N": (res.force_error * scales["force_N"]).tolist(),
-        "h_min_error_m": (res.film_min_error * d).tolist(),
+        "force_error": res.force_error.tolist(),
+        "h_min_error": res.film_min_error.tolist(),
+        "h_center_error": res.film_center_error.tolist(),
         "steps": res.accepted,
         "rejected_steps": res.rejected,
         "run_s": res.run_s,
         "compile_s": res.compile_s,
         "ok": res.ok,
-        "scales": scales,
     }
+    if test is None:
+        return out
+    scales = test.scales
+    d, f = scales["gap_m"], scales["force_N"]  # d_c, and the force scale
+    out.update(
+        t_s=(res.t * scales["time_s"]).tolist(),
+        force_N=(res.force * f).tolist(),
+        h_min_m=(res.film_min * d).tolist(),
+        h_center_m=(res.film_center * d).tolist(),
+        force_error_N=(res.force_error * f).tolist(),
+        h_min_error_m=(res.film_min_error * d).tolist(),
+        scales=scales,
+    )
+    if z0_m is not None:
+        out.update(
+            gap=res.gap.tolist(),
+            gap_m=(res.gap * d).tolist(),
+            approach_m=(z0_m - res.gap * d).tolist(),
+            gap_error_m=(res.gap_error * d).tolist(),
+        )
+    return out
 
 
 def _creep(args) -> int:
@@ -556,7 +513,7 @@ def _creep(args) -> int:
         res = relax(test.beta, test.z0_bar, t_end, drive=test.drive(history),
                     settings=settings, profile_times=profile_times, substrate=substrate,
                     progress=phase)
-    out = _drive_json(res, test.scales, test.gap)
+    out = _result_json(res, test, z0_m=test.gap)
     out.update(load_N=test.load, hertz_indentation_m=test.indent,
                settings=dataclasses.asdict(settings), substrate=record)
     d = test.indent
@@ -567,7 +524,7 @@ def _creep(args) -> int:
         f"film h(0) {res.film_center[-1] * d:.3g} m; {res.accepted} steps, run {res.run_s:.3f} s,"
         f" compile {res.compile_s:.2f} s"
     )
-    _write(args, out, res, "creep", test, line)
+    _write(args, out, lambda path: _plot_drive(res, path, "creep", test, line))
     return 0
 
 
@@ -611,7 +568,7 @@ def _bounce(args) -> int:
                                       pressure=again.pressure, displacement=again.displacement,
                                       film=again.film)
     e = restitution(res)
-    out = _drive_json(res, test.scales, test.gap)
+    out = _result_json(res, test, z0_m=test.gap)
     v = test.speed
     out.update(
         velocity=res.velocity.tolist(),
@@ -625,7 +582,8 @@ def _bounce(args) -> int:
         substrate=record,
     )
     print(bounce_summary(res, test, e))
-    _write(args, out, res, "bounce", test, line, ["impact: peak force", "end"])
+    _write(args, out, lambda path: _plot_drive(res, path, "bounce", test, line,
+                                               ["impact: peak force", "end"]))
     return 0
 
 
@@ -649,16 +607,28 @@ def bounce_summary(res, test, e) -> str:
     )
 
 
-def _write(args, out, res, kind, test, substrate, notes=None):
+def _write(args, out, plot):
+    """The one writer of every ``lubjax`` command: the JSON ``out`` to --out (atomically), then
+    ``plot(path)`` to --plot."""
     if args.out:
         with atomic_open(args.out, "w") as f:
             json.dump(out, f)
         print(f"wrote {args.out}")
     if args.plot:
-        from ._plotting import plot_drive
-
-        plot_drive(res, args.plot, kind, test, substrate=substrate, profile_notes=notes)
+        plot(args.plot)
         print(f"wrote {args.plot}")
+
+
+def _plot_drive(res, path, kind, test, substrate, notes=None):
+    from ._plotting import plot_drive
+
+    plot_drive(res, path, kind, test, substrate=substrate, profile_notes=notes)
+
+
+def _plot_relax(res, path, test, substrate):
+    from ._plotting import plot_result
+
+    plot_result(res, path, test=test, substrate=substrate)
 
 
 def _dispatch(args) -> int:
@@ -731,9 +701,8 @@ def _relax(args) -> int:
         t_end = args.t_end / test.time_scale if test else args.t_end
     if not (math.isfinite(t_end) and t_end > 0):
         raise UsageError(f"--t-end must be > 0, got {args.t_end}")
-    given = [("dr", args.dr), ("rtol", args.rtol), ("order", args.order),
-             ("max_steps", args.max_steps)]
-    settings = Settings(**{k: v for k, v in given if v is not None})
+    given = accuracy_settings(args) | ({"dr": args.dr} if args.dr is not None else {})
+    settings = Settings(**given)
     scale = (test.radius, test.indent, test.time_scale) if test else None
     substrate, record, line = _substrate(args, settings, scale)
     profile_times = [t for t in (0.25, 0.5, 1.0, 2.0, t_end) if t <= t_end]
@@ -741,33 +710,8 @@ def _relax(args) -> int:
     with progress_line("relax") as phase:
         res = relax(beta, z0, t_end, settings=settings, profile_times=profile_times,
                     substrate=substrate, progress=phase)
-    out = {
-        "beta": beta,
-        "z0": z0,
-        "t": res.t.tolist(),
-        "force": res.force.tolist(),
-        "h_min": res.film_min.tolist(),
-        "h_center": res.film_center.tolist(),
-        "run_s": res.run_s,
-        "compile_s": res.compile_s,
-        "force_error": res.force_error.tolist(),
-        "h_min_error": res.film_min_error.tolist(),
-        "h_center_error": res.film_center_error.tolist(),
-        "steps": res.accepted,
-        "rejected_steps": res.rejected,
-        "ok": res.ok,
-        "settings": dataclasses.asdict(settings),
-        "substrate": record,
-    }
-    if test:
-        out.update(
-            t_s=(res.t * test.time_scale).tolist(),
-            force_N=(res.force * test.force_scale).tolist(),
-            h_min_m=(res.film_min * test.indent).tolist(),
-            h_center_m=(res.film_center * test.indent).tolist(),
-            force_error_N=(res.force_error * test.force_scale).tolist(),
-            scales={k: test.scales[k] for k in ("time_s", "force_N", "length_m", "pressure_Pa")},
-        )
+    out = _result_json(res, test)
+    out.update(settings=dataclasses.asdict(settings), substrate=record)
     if line:
         print(f"substrate: {line}")
     print(relax_summary(res, test))
@@ -777,15 +721,7 @@ def _relax(args) -> int:
             note += (f" (t̄ = t/t_c, t_c = {test.time_scale:.4g} s; h̄ = h/d_c, "
                      f"d_c = {test.indent:.4g} m)")
         print(f"note: {note}")
-    if args.out:
-        with atomic_open(args.out, "w") as f:
-            json.dump(out, f)
-        print(f"wrote {args.out}")
-    if args.plot:
-        from ._plotting import plot_result
-
-        plot_result(res, args.plot, test=test, substrate=line)
-        print(f"wrote {args.plot}")
+    _write(args, out, lambda path: _plot_relax(res, path, test, line))
     return 0
 
 

@@ -8,13 +8,15 @@
   target only once everything is written: a failed write leaves the old file as it was.
 * :class:`Parser` and :func:`run_cli` give each failure one line on stderr and an exit status:
   ``EXIT_USAGE`` (2) for bad usage or input, ``EXIT_FAILED`` (1) for a run that failed.
+
+The options the two command lines share are in :mod:`lubjax._cli_options`; ``fitting`` may
+import both modules.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import math
 import os
 import re
 import stat
@@ -76,37 +78,6 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message):
         raise UsageError(f"{message} (see {self.prog} --help)")
-
-
-def positive_float(text: str) -> float:
-    """argparse type: a finite number > 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number > 0, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
-    return value
-
-
-def positive_int(text: str) -> int:
-    """argparse type: an integer ≥ 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be an integer ≥ 1, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be an integer ≥ 1, got {text!r}")
-    return value
-
-
-def add_debug_flag(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--debug",
-        action="store_true",
-        default=argparse.SUPPRESS,
-        help="on an error, show the Python traceback instead of the one-line message",
-    )
 
 
 def run_cli(prog: str, parser: argparse.ArgumentParser, body, argv=None) -> int:
