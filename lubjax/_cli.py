@@ -447,6 +447,8 @@ def _result_json(res, test=None, z0_m=None):
         "run_s": res.run_s,
         "compile_s": res.compile_s,
         "ok": res.ok,
+        "problems": res.problems(),  # the text relax's SolverError and Result.problems() give
+        "unresolved_film": res.unresolved_film(),
     }
     if test is None:
         return out

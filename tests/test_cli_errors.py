@@ -62,7 +62,7 @@ def _fake_result(t_end=1.0, n=20):
         profile_times=np.array([0.5, 1.0]), pressure=np.ones((2, 30)), film=np.ones((2, 30)),
         force_error=np.full(n, 1e-4), film_min_error=np.full(n, 1e-5),
         film_center_error=np.full(n, 1e-5), accepted=n - 1, rejected=0,
-        unresolved_film=lambda: None,
+        unresolved_film=lambda: None, problems=list,
     )  # fmt: skip
 
 

@@ -281,7 +281,7 @@ def _relax_result(t_end=5.0, n=41):
         force_error=np.full(n, 1e-3), accepted=n - 1, rejected=2, run_s=0.1, compile_s=1.0,
         r=r, profile_times=np.array([1.0, t_end]), pressure=np.ones((2, 30)),
         film=np.ones((2, 30)), gap=1.0 - np.minimum(t, 1.0), film_min_error=np.zeros(n),
-        film_center_error=np.zeros(n), ok=True, unresolved_film=lambda: None,
+        film_center_error=np.zeros(n), ok=True, unresolved_film=lambda: None, problems=list,
     )  # fmt: skip
 
 
@@ -414,3 +414,16 @@ def test_relax_tells_its_phases_in_order():
     lubjax.relax(100.0, 0.5, 1.0, settings=lubjax.Settings(rtol=1e-3, error_estimate=False),
                  progress=quiet.append)
     assert quiet == ["compiling the solver", "running the solver"]
+
+
+def test_relax_json_carries_the_runs_problems_and_film_note(tmp_path):
+    """The JSON says what relax's message and Result.problems() say, in the same words."""
+    import json
+
+    import lubjax._cli as lcli_mod
+
+    out = tmp_path / "run.json"
+    assert lcli_mod.main(["relax", "--beta", "100", "--z0", "0.5", "--t-end", "1",
+                          "--rtol", "1e-3", "--out", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data["ok"] and data["problems"] == [] and data["unresolved_film"] is None
