@@ -48,9 +48,11 @@ from ._units import (  # noqa: E402
     RelaxationTest,
     contact_modulus,
     hertz_indentation,
+    modulus_for_beta,
     plane_strain_modulus,
     reduced_radius,
     si_scales,
+    spring_stiffness_bar,
 )
 
 # The stepper toolkit lives in lubjax.stepper; these names stay importable here too (not in
@@ -109,6 +111,7 @@ __all__ = [
     "layer_thickness_bar",
     "make_plan",
     "mesh_for",
+    "modulus_for_beta",
     "plane_strain_modulus",
     "reduced_radius",
     "relax",
@@ -116,6 +119,7 @@ __all__ = [
     "rigid_squeeze_force",
     "rigid_squeeze_pressure",
     "si_scales",
+    "spring_stiffness_bar",
     "stepper",
     "sweep",
     "uniform_mesh",

@@ -97,6 +97,17 @@ def test_si_scales_is_what_every_si_class_and_the_fit_use():
         lubjax.si_scales(1.0, 1.0, 1.0)
 
 
+def test_the_fits_conversions_invert_si_scales():
+    """The fit's start (E* from β) and its spring (k in N/m to K̄) go through lubjax's units."""
+    E, R, dc, v, eta, k = 3.9e6, 2e-3, 1.4e-4, 2e-6, 90.0, 5e3
+    beta = lubjax.si_scales(E, R, dc, speed=v, viscosity=eta)["beta"]
+    assert lubjax.modulus_for_beta(beta, R, dc, speed=v, viscosity=eta) == pytest.approx(
+        E, rel=1e-14)
+    # K̄ is k in units of F_s/d_c
+    force = lubjax.si_scales(E, R, dc, speed=v)["force_N"]
+    assert lubjax.spring_stiffness_bar(k, E, R, dc) == pytest.approx(k * dc / force, rel=1e-14)
+
+
 def test_checks_let_tracers_through_and_name_what_is_allowed():
     @jax.jit
     def scaled(k):
