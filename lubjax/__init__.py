@@ -55,25 +55,6 @@ from ._units import (  # noqa: E402
     spring_stiffness_bar,
 )
 
-# The stepper toolkit lives in lubjax.stepper; these names stay importable here too (not in
-# __all__) for code written against the flat namespace.
-from .stepper import (  # noqa: E402, F401
-    Discretisation,
-    State,
-    Step,
-    Tolerance,
-    Trajectory,
-    discretise,
-    displacement,
-    evaluate,
-    film_thickness,
-    force_weights,
-    influence_matrix,
-    kernel,
-    layer_influence_matrix,
-    rollout,
-)
-
 #: The user API. The stepper toolkit (rollout, discretise, evaluate, ...) is lubjax.stepper.
 __all__ = [
     "BETA_RANGE",

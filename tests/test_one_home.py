@@ -161,6 +161,7 @@ def test_public_surface():
     for name in lubjax.stepper.__all__:
         assert hasattr(lubjax.stepper, name), name
         assert name not in lubjax.__all__, name
+        assert not hasattr(lubjax, name), f"lubjax.{name}: the toolkit's home is lubjax.stepper"
     assert lubjax.stepper.__doc__
 
 
