@@ -264,10 +264,7 @@ class Collision(_Scene):
                 ("gap", "m"),
             ],
         )
-        w = float(self.weight)
-        if not (math.isfinite(w) and w >= 0):
-            raise ValueError(f"weight must be finite and >= 0 (N), got {self.weight!r}")
-        object.__setattr__(self, "weight", w)
+        object.__setattr__(self, "weight", check_quantity("weight", self.weight, "N", zero=True))
 
     @property
     def time_scale(self) -> float:
