@@ -180,7 +180,7 @@ def _travel_guess(t, d, f, scales: Scales, notes: list) -> dict:
         after = np.flatnonzero((idx > k_peak) & (smooth < half))
         t_half = float(t[after[0]] - t[k_peak]) if after.size else tc
         beta = RELAX_CONSTANT * tc / max(t_half, 1e-3 * tc)
-        E_star = beta * 6 * math.pi * eta * v0 * R**1.5 / dc**2.5
+        E_star = lubjax.modulus_for_beta(beta, R, dc, speed=v0, viscosity=eta)
         notes.append(f"E* from the relaxation time t_R = t_c/beta (t_half = {t_half:.3g} s)")
     return dict(E_star=float(E_star), viscosity=float(eta), z0=float(z0), offset=offset)
 

@@ -48,6 +48,7 @@ from typing import NamedTuple
 import numpy as np
 
 from lubjax._files import MAX_TRAVEL_OVER_RADIUS, write_text
+from lubjax._fitting_api import checks as _checks
 
 COLUMNS = ("time_s", "displacement_m", "force_N")
 MIN_ROWS = 10
@@ -57,7 +58,6 @@ MAX_FILE_BYTES = 1 << 30
 RADIUS_RANGE_M = (1e-7, 1.0)
 #: |force| above this [N] is refused: far beyond a soft lubricated contact (a wrong unit).
 MAX_FORCE_N = 1e3
-POISSON_RANGE = (-1.0, 0.5)  # (-1, 0.5]
 
 _EOL = re.compile(r"\r\n|\r|\n")
 
@@ -113,14 +113,14 @@ def _positive_radius(value, where: str) -> float:
 
 
 def _poisson(value, where: str) -> float:
-    lo, hi = POISSON_RANGE
+    """A header's Poisson ratio (a string) in the solver's range (lubjax.POISSON_RANGE)."""
     try:
-        nu = float(value)
+        return _checks.check_poisson("poisson_ratio", float(value))
     except (TypeError, ValueError):
-        nu = math.nan
-    if not (math.isfinite(nu) and lo < nu <= hi):
-        raise TraceError(f"{where}: poisson_ratio must be a number in (-1, 0.5], got {value!r}")
-    return nu
+        lo, hi = _checks.POISSON_RANGE
+        raise TraceError(
+            f"{where}: poisson_ratio must be a number in ({lo:g}, {hi:g}], got {value!r}"
+        ) from None
 
 
 #: Values of the ``# drive:`` header key (fitting._model.DRIVES).

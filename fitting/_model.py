@@ -352,7 +352,8 @@ def trace_data(
     if spec.drive == "force":
         drive_unit = scales.input_end / fsu
     elif spec.drive == "spring":
-        drive_unit = math.pi * trace.meta_float("stiffness_N_m") / (2 * math.sqrt(R * dc))
+        # K̄ at E* = 1: the model divides by the fitted E*
+        drive_unit = lubjax.spring_stiffness_bar(trace.meta_float("stiffness_N_m"), 1.0, R, dc)
     else:
         drive_unit = 0.0
     disc = None if spec.layer is None else _layer_disc(

@@ -48,28 +48,11 @@ from ._units import (  # noqa: E402
     RelaxationTest,
     contact_modulus,
     hertz_indentation,
+    modulus_for_beta,
     plane_strain_modulus,
     reduced_radius,
     si_scales,
-)
-
-# The stepper toolkit lives in lubjax.stepper; these names stay importable here too (not in
-# __all__) for code written against the flat namespace.
-from .stepper import (  # noqa: E402, F401
-    Discretisation,
-    State,
-    Step,
-    Tolerance,
-    Trajectory,
-    discretise,
-    displacement,
-    evaluate,
-    film_thickness,
-    force_weights,
-    influence_matrix,
-    kernel,
-    layer_influence_matrix,
-    rollout,
+    spring_stiffness_bar,
 )
 
 #: The user API. The stepper toolkit (rollout, discretise, evaluate, ...) is lubjax.stepper.
@@ -109,6 +92,7 @@ __all__ = [
     "layer_thickness_bar",
     "make_plan",
     "mesh_for",
+    "modulus_for_beta",
     "plane_strain_modulus",
     "reduced_radius",
     "relax",
@@ -116,6 +100,7 @@ __all__ = [
     "rigid_squeeze_force",
     "rigid_squeeze_pressure",
     "si_scales",
+    "spring_stiffness_bar",
     "stepper",
     "sweep",
     "uniform_mesh",

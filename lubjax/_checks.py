@@ -63,15 +63,89 @@ def check_positive(name, value, unit: str | None = None) -> float:
     return float(value)
 
 
-def check_quantity(name, value, unit: str) -> float:
-    """A physical quantity in SI (anything ``float`` reads), finite and > 0, as a float."""
+def check_quantity(name, value, unit: str, zero: bool = False) -> float:
+    """A physical quantity in SI (anything ``float`` reads), finite and > 0 (≥ 0 with
+    ``zero``), as a float."""
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number in {unit}, got {value!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise ValueError(f"{name} must be finite and > 0 ({unit}), got {value!r}")
+        kind = "a number" if zero else "a positive number"
+        raise ValueError(f"{name} must be {kind} in {unit}, got {value!r}") from None
+    if not (math.isfinite(v) and (v >= 0 if zero else v > 0)):
+        raise ValueError(f"{name} must be finite and {'>=' if zero else '>'} 0 ({unit}), "
+                         f"got {value!r}")
     return v
+
+
+def check_positive_or_none(name, value):
+    """None (the default applies) or a real number > 0."""
+    if value is not None and not (isinstance(value, numbers.Real) and value > 0):
+        raise ValueError(f"{name} must be > 0 or None, got {value!r}")
+    return value
+
+
+def check_int_at_least(name, value, lo: int) -> int:
+    """A Python int (not a bool) ≥ ``lo``."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+        raise ValueError(f"{name} must be an integer >= {lo}, got {value!r}")
+    return value
+
+
+_SHOW = object()
+
+
+def check_finite_array(name, value, lo=None, lo_open=False, shown=_SHOW) -> np.ndarray:
+    """``value`` as a float64 array, every entry finite and ≥ ``lo`` (> with ``lo_open``):
+    "``name`` must be finite [and > lo], got ..." showing the array, or ``shown`` (None: no
+    "got")."""
+    arr = np.asarray(value, dtype=np.float64)
+    good = np.isfinite(arr)
+    if lo is not None:
+        good &= arr > lo if lo_open else arr >= lo
+    if not np.all(good):
+        bound = "" if lo is None else f" and {'>' if lo_open else '>='} {lo:g}"
+        got = "" if shown is None else f", got {arr if shown is _SHOW else shown}"
+        raise ValueError(f"{name} must be finite{bound}{got}")
+    return arr
+
+
+def check_increasing(name, arr: np.ndarray) -> np.ndarray:
+    """A 1-D array whose entries strictly increase."""
+    if np.any(np.diff(arr) <= 0):
+        raise ValueError(f"{name} must be strictly increasing")
+    return arr
+
+
+def check_t_end(t_end, t_start) -> float:
+    """A scalar end time in (``t_start``, :data:`T_END_MAX`], as a float."""
+    if isinstance(t_end, bool) or not isinstance(t_end, (numbers.Real, np.ndarray, jax.Array)):
+        raise ValueError(f"t_end must be a number, got {t_end!r}")
+    if np.ndim(t_end) != 0:
+        raise ValueError(f"t_end must be a scalar, got shape {np.shape(t_end)}")
+    value = float(t_end)
+    if not (math.isfinite(value) and t_start < value <= T_END_MAX):
+        # + 0.0: a start of -0.0 reads as 0
+        raise ValueError(
+            f"t_end must be finite and in ({t_start + 0.0:g}, {T_END_MAX:g}], got {t_end!r}"
+        )
+    return value
+
+
+def check_times(times, name, t_start, t_end) -> np.ndarray:
+    """Output times: a 1-D float64 array (a scalar becomes one entry), finite, in
+    [``t_start``, ``t_end``]."""
+    try:
+        arr = np.asarray(times, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a 1-D sequence of numbers, got {times!r}") from None
+    arr = np.atleast_1d(arr)
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be 1-D, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {arr[~np.isfinite(arr)][:3]}")
+    if arr.size and (arr.min() < t_start or arr.max() > t_end):
+        raise ValueError(f"{name} must lie in [{t_start + 0.0:g}, {t_end:g}], got {arr}")
+    return arr
 
 
 def check_poisson(name, value) -> float:

@@ -17,6 +17,7 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
+from ._checks import check_finite_array, check_increasing
 from ._pytree import register
 
 
@@ -84,10 +85,9 @@ class SampledTravel:
         d = np.asarray(self.travel_samples, dtype=np.float64)
         if t.ndim != 1 or t.shape != d.shape or t.size < 2:
             raise ValueError("t and travel must be 1-D arrays of the same length >= 2")
-        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(d))):
-            raise ValueError("t and travel must be finite")
-        if np.any(np.diff(t) <= 0):
-            raise ValueError("t must be strictly increasing")
+        for a in (t, d):
+            check_finite_array("t and travel", a, shown=None)
+        check_increasing("t", t)
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "travel_samples", d)
         object.__setattr__(self, "slopes", _monotone_slopes(t, d))
@@ -96,9 +96,8 @@ class SampledTravel:
         object.__setattr__(self, "monotone", np.bool_(np.all(np.diff(d) >= 0)))
         if not len(self.breakpoints):
             object.__setattr__(self, "breakpoints", _motion_breakpoints(t, d))
-        bp = np.asarray(self.breakpoints, dtype=np.float64).ravel()
-        if not np.all(np.isfinite(bp)):
-            raise ValueError(f"breakpoints must be finite, got {self.breakpoints}")
+        bp = check_finite_array("breakpoints", np.ravel(self.breakpoints),
+                                shown=self.breakpoints)
         object.__setattr__(self, "breakpoints", tuple(float(b) for b in bp))
 
     @property

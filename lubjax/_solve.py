@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 import numbers
 import time
 import warnings
@@ -15,10 +14,13 @@ import numpy as np
 
 from . import _compiler
 from ._checks import (
-    T_END_MAX,
     check_choice,
+    check_int_at_least,
     check_parameters,
     check_positive,
+    check_positive_or_none,
+    check_t_end,
+    check_times,
 )
 from ._controller import DONE, Tolerance, stop_reason
 from ._discretisation import Discretisation, discretise
@@ -131,12 +133,9 @@ class Settings:
             raise ValueError(f"Settings.rtol must be in [1e-10, 0.1], got {self.rtol}")
         check_choice("Settings.order", self.order, (1, 2, 3))
         check_choice("Settings.film_error", self.film_error, ("relative", "flux"))
-        if not (isinstance(self.max_steps, int) and self.max_steps >= 10):
-            raise ValueError(f"Settings.max_steps must be an integer >= 10, got {self.max_steps!r}")
+        check_int_at_least("Settings.max_steps", self.max_steps, 10)
         for name in ("dr", "length", "mesh_growth"):
-            value = getattr(self, name)
-            if value is not None and not (isinstance(value, numbers.Real) and value > 0):
-                raise ValueError(f"Settings.{name} must be > 0 or None, got {value!r}")
+            check_positive_or_none(f"Settings.{name}", getattr(self, name))
         c = self.contact_radius
         if not (c is None or c == "auto" or (
             isinstance(c, numbers.Real) and not isinstance(c, bool) and 0 <= c < self.r_fine
@@ -193,32 +192,6 @@ class Plan(NamedTuple):
     substrate: object = HalfSpace()  # lubjax.HalfSpace, Layer, Viscoelastic
 
 
-def _check_t_end(t_end, t_start) -> float:
-    if isinstance(t_end, bool) or not isinstance(t_end, (numbers.Real, np.ndarray, jax.Array)):
-        raise ValueError(f"t_end must be a number, got {t_end!r}")
-    if np.ndim(t_end) != 0:
-        raise ValueError(f"t_end must be a scalar, got shape {np.shape(t_end)}")
-    value = float(t_end)
-    if not (math.isfinite(value) and t_start < value <= T_END_MAX):
-        raise ValueError(f"t_end must be finite and in ({t_start:g}, {T_END_MAX:g}], got {t_end!r}")
-    return value
-
-
-def _check_times(times, name, t_start, t_end) -> np.ndarray:
-    try:
-        arr = np.asarray(times, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a 1-D sequence of numbers, got {times!r}") from None
-    arr = np.atleast_1d(arr)
-    if arr.ndim != 1:
-        raise ValueError(f"{name} must be 1-D, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {arr[~np.isfinite(arr)][:3]}")
-    if arr.size and (arr.min() < t_start or arr.max() > t_end):
-        raise ValueError(f"{name} must lie in [{t_start:g}, {t_end:g}], got {arr}")
-    return arr
-
-
 def _drive_of(history, drive):
     if history is not None and drive is not None:
         raise ValueError(
@@ -272,10 +245,10 @@ def make_plan(
     history = _drive_of(history, drive)
     settings = Settings() if settings is None else settings
     t_start = float(history.t_start)
-    t_end = _check_t_end(t_end, t_start)
+    t_end = check_t_end(t_end, t_start)
     if times is None:
         times = np.linspace(t_start, t_end, 501)
-    times = _check_times(times, "times", t_start, t_end)
+    times = check_times(times, "times", t_start, t_end)
     mesh = settings.mesh()
     substrate = as_substrate(substrate)
     return Plan(
@@ -436,7 +409,7 @@ class Result:
         any ``times`` in [t̄_start, t_end], by the stepper's interpolant."""
         if field not in _SERIES[1:]:
             raise ValueError(f"field must be one of {', '.join(_SERIES[1:])}; got {field!r}")
-        times = _check_times(times, "times", float(self.t[0]), self.t_end)
+        times = check_times(times, "times", float(self.t[0]), self.t_end)
         return evaluate_host(self.steps, times, field)
 
     def problems(self) -> list[str]:
@@ -565,8 +538,8 @@ def relax(
     history = _drive_of(history, drive)
     settings = Settings() if settings is None else settings
     t_start = float(history.t_start)
-    t_end = _check_t_end(t_end, t_start)
-    ptimes = _check_times(profile_times, "profile_times", t_start, t_end)
+    t_end = check_t_end(t_end, t_start)
+    ptimes = check_times(profile_times, "profile_times", t_start, t_end)
     mesh = mesh_for(settings, drive=history, beta=beta, z0=z0, t_end=t_end)
     substrate = as_substrate(substrate)
     disc = discretise(mesh, substrate)

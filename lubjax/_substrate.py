@@ -37,7 +37,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_layer_base, check_poisson, check_positive, is_traced
+from ._checks import (
+    check_finite_array,
+    check_layer_base,
+    check_poisson,
+    check_positive,
+    is_traced,
+)
 from ._influence import influence_matrix
 from ._mesh import Mesh
 from ._pytree import register
@@ -158,8 +164,7 @@ class Viscoelastic:
             raise ValueError(
                 f"Viscoelastic.retardation must be >= 0 with a sum < 1 (J₀ = 1 - sum > 0), got {j}"
             )
-        if not (np.all(np.isfinite(lam)) and np.all(lam > 0)):
-            raise ValueError(f"Viscoelastic.times must be finite and > 0, got {lam}")
+        check_finite_array("Viscoelastic.times", lam, 0.0, lo_open=True)
         if not isinstance(self.elastic, (HalfSpace, Layer)):
             raise ValueError("Viscoelastic.elastic must be HalfSpace() or a Layer")
         object.__setattr__(self, "retardation", j)

@@ -38,6 +38,20 @@ def si_scales(E_star, radius, d_c, *, t_c=None, speed=None, viscosity=None) -> d
     return out
 
 
+def modulus_for_beta(beta, radius, d_c, *, speed, viscosity) -> float:
+    """E* [Pa] for which a scene of radius R [m], depth scale d_c [m], speed v [m/s] and film
+    viscosity η [Pa s] has the given β: eq 8e solved for E*, E* = 6π β η v R^{3/2}/d_c^{5/2}
+    (the inverse of :func:`si_scales`' ``beta``)."""
+    return beta * 6 * math.pi * viscosity * speed * radius**1.5 / d_c**2.5
+
+
+def spring_stiffness_bar(k, E_star, radius, d_c) -> float:
+    """K̄ = π k/(2E*√(R d_c)): a spring of stiffness k [N/m] in the units F_s/d_c of
+    :class:`lubjax.Spring` (F_s of eq 11b) for modulus E* [Pa], radius R [m] and depth scale
+    d_c [m]."""
+    return math.pi * k / (2 * E_star * math.sqrt(radius * d_c))
+
+
 def plane_strain_modulus(E: float, poisson_ratio: float) -> float:
     """E* = E/(1 - ν²)."""
     E = check_quantity("E", E, "Pa")
@@ -250,10 +264,7 @@ class Collision(_Scene):
                 ("gap", "m"),
             ],
         )
-        w = float(self.weight)
-        if not (math.isfinite(w) and w >= 0):
-            raise ValueError(f"weight must be finite and >= 0 (N), got {self.weight!r}")
-        object.__setattr__(self, "weight", w)
+        object.__setattr__(self, "weight", check_quantity("weight", self.weight, "N", zero=True))
 
     @property
     def time_scale(self) -> float:

@@ -104,7 +104,7 @@ def test_film_volume_balance_backward_euler():
     """
     settings = lubjax.Settings(order=1, error_estimate=False)
     res = lubjax.relax(100.0, 0.5, t_end=2.0, settings=settings, profile_times=[0.0, 2.0])
-    disc = lubjax.discretise(lubjax.Mesh(tuple(res.r)))  # the run's own mesh
+    disc = lubjax.stepper.discretise(lubjax.Mesh(tuple(res.r)))  # the run's own mesh
     area = np.asarray(disc.cell_area)[:-1]
     change = (res.film[1][:-1] - res.film[0][:-1]) @ area
     outflow = np.sum(np.diff(res.t) * res.outflow[1:])
@@ -115,7 +115,7 @@ def test_film_volume_balance_default_scheme():
     """Default BDF2: volume lost from the domain equals the time-integrated outflow to the
     accuracy of the time discretisation (trapezoid on the grid)."""
     res = lubjax.relax(100.0, 1.0, t_end=3.0, profile_times=[0.0, 3.0])
-    disc = lubjax.discretise(lubjax.Mesh(tuple(res.r)))  # the run's own mesh
+    disc = lubjax.stepper.discretise(lubjax.Mesh(tuple(res.r)))  # the run's own mesh
     area = np.asarray(disc.cell_area)[:-1]
     change = (res.film[1][:-1] - res.film[0][:-1]) @ area
     flux = -np.trapezoid(res.outflow[1:], res.t[1:]) if hasattr(np, "trapezoid") else None

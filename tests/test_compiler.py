@@ -53,13 +53,13 @@ def test_compiler_options_switch_off(monkeypatch):
 
 
 def test_host_evaluation_matches_jax():
-    """Result.at (NumPy) and lubjax.evaluate (jax) are the same interpolant, before the start,
-    inside the run and past its end (NaN)."""
+    """Result.at (NumPy) and lubjax.stepper.evaluate (jax) are the same interpolant, before the
+    start, inside the run and past its end (NaN)."""
     res = lubjax.relax(30.0, 0.8, 3.0, settings=lubjax.Settings(**COARSE))
     times = np.concatenate([[0.0], np.random.default_rng(0).uniform(0.0, 3.0, 200), [3.0]])
     for field in ("force", "film_min", "gap"):
         host = res.at(times, field)
-        device = np.asarray(lubjax.evaluate(res.steps, times, field))
+        device = np.asarray(lubjax.stepper.evaluate(res.steps, times, field))
         np.testing.assert_allclose(host, device, rtol=1e-13, atol=1e-300)
     past = evaluate_host(res.steps, [3.5])
     assert np.isnan(past[0])

@@ -178,8 +178,8 @@ def test_drive_gradients_reverse_forward_and_differences(drive):
 
         def gaps(p):
             d = jax.tree_util.tree_unflatten(treedef, [p[1], *leaves[1:]])
-            traj = lubjax.rollout(plan.disc, p[0], 1.0, d, plan.t_end, plan.tol, mode=mode)
-            return lubjax.evaluate(traj.steps, times, "gap")
+            traj = lubjax.stepper.rollout(plan.disc, p[0], 1.0, d, plan.t_end, plan.tol, mode=mode)
+            return lubjax.stepper.evaluate(traj.steps, times, "gap")
 
         return gaps
 

@@ -120,7 +120,7 @@ def test_entries_match_real_space_quadrature(thickness, nu, interface):
     r = mesh.r
     n = r.size
     delta = _layer.layer_correction(mesh, thickness, nu, interface)
-    scale = np.abs(lubjax.influence_matrix(mesh)).max()
+    scale = np.abs(lubjax.stepper.influence_matrix(mesh)).max()
     for i, j in [(0, 0), (4, 4), (4, 5), (0, n - 1), (n - 1, 2), (n - 2, n - 1)]:
         ref = _real_space_entry(r, i, j, thickness, nu, interface)
         assert abs(delta[i, j] - ref) <= 1e-11 * scale, (i, j, delta[i, j], ref)  # measured 2e-14
@@ -135,7 +135,7 @@ def test_a_thick_layer_is_the_half_space(interface):
     of the largest entry at H̄ = 10⁴ and 1e-6 needs H̄ ~ 10⁷. Beyond the leading term the
     remainder is 7e-6 at H̄ = 10³ and falls as H̄⁻³."""
     mesh = lubjax.graded_mesh(dr=0.05, r_fine=1.0, length=20.0, growth=1.2)
-    half = lubjax.influence_matrix(mesh, weighted=False)  # the layer's representation
+    half = lubjax.stepper.influence_matrix(mesh, weighted=False)  # the layer's representation
     c0 = quad(lambda t: -_layer.transfer_minus_one(t, 0.5, interface), 0, 60, limit=200)[0]
     # ∫ φ_j s ds of the plain hats (ΔŴ's representation; Ŵ_half weights them, lubjax/_layer.py)
     r = mesh.r
@@ -145,11 +145,11 @@ def test_a_thick_layer_is_the_half_space(interface):
     scale = np.abs(half).max()
     rest = {}
     for thickness in (1e3, 1e4):
-        layer = lubjax.layer_influence_matrix(mesh, thickness, 0.5, interface)
+        layer = lubjax.stepper.layer_influence_matrix(mesh, thickness, 0.5, interface)
         lead = -(4 / np.pi) * c0 / thickness * np.broadcast_to(moment, half.shape)
         rest[thickness] = np.abs(layer - half - lead).max() / scale
     assert rest[1e3] < 1e-5 and rest[1e4] == pytest.approx(rest[1e3] * 1e-3, rel=0.01), rest
-    layer = lubjax.layer_influence_matrix(mesh, 1e7, 0.5, interface)
+    layer = lubjax.stepper.layer_influence_matrix(mesh, 1e7, 0.5, interface)
     assert np.abs(layer - half).max() < 2e-6 * scale
 
 
@@ -157,7 +157,7 @@ def _gaussian_case(thickness, nu, interface, width=2.0):
     mesh = lubjax.graded_mesh(dr=0.01, r_fine=3 * width, length=8 * width, growth=1.05)
     r = mesh.r
     p = np.exp(-((r / width) ** 2))
-    w = -lubjax.layer_influence_matrix(mesh, thickness, nu, interface) @ p
+    w = -lubjax.stepper.layer_influence_matrix(mesh, thickness, nu, interface) @ p
     return r, p, w
 
 
@@ -203,7 +203,7 @@ def test_thin_incompressible_bonded_layer():
 def test_matrix_is_cached_and_read_only():
     mesh = lubjax.graded_mesh(dr=0.05, r_fine=1.0, length=10.0, growth=1.2)
     a = lubjax.Layer(2.0).influence(mesh)
-    assert a is lubjax.layer_influence_matrix(mesh, 2.0, 0.5, "bonded")
+    assert a is lubjax.stepper.layer_influence_matrix(mesh, 2.0, 0.5, "bonded")
     assert not a.flags.writeable and a.dtype == np.float64 and a.shape == (mesh.size,) * 2
 
 
@@ -259,8 +259,8 @@ def test_dry_contact_on_a_thin_incompressible_bonded_layer():
     thickness = 0.1
     mesh = lubjax.graded_mesh(dr=0.01, r_fine=4.5, length=8.0, growth=1.1)
     r = mesh.r
-    W = lubjax.layer_influence_matrix(mesh, thickness, 0.5, "bonded")
-    c = lubjax.force_weights(mesh)
+    W = lubjax.stepper.layer_influence_matrix(mesh, thickness, 0.5, "bonded")
+    c = lubjax.stepper.force_weights(mesh)
     deltas = np.array([0.25, 1.0, 4.0])
     excess = np.array([c @ _dry_contact(W, r, d) / (np.pi**2 * d**3 / (4 * thickness**3)) - 1
                        for d in deltas])
@@ -284,7 +284,7 @@ def _layer_contact_mesh():
     # H̄ = 1 is the unit: ā = a/h. Δr̄ = 0.005 (a/h = 0.2 spans 40 cells); the base cuts the
     # far field off at r ~ H, so L̄ = 20 H loses nothing. Results move < 0.7 % at Δr̄ = 0.0025.
     mesh = lubjax.graded_mesh(dr=0.005, r_fine=1.2, length=20.0, growth=1.1)
-    return mesh, lubjax.layer_influence_matrix(mesh, 1.0, 0.5, "bonded")
+    return mesh, lubjax.stepper.layer_influence_matrix(mesh, 1.0, 0.5, "bonded")
 
 
 def test_dry_contact_on_a_thick_bonded_layer_matches_its_asymptotics():
@@ -300,8 +300,8 @@ def test_dry_contact_on_a_thick_bonded_layer_matches_its_asymptotics():
     2c₀/π = 1.127 and (21/8)A² = 1.48 (the fitted x³ term absorbs some of the x²)."""
     mesh, W = _layer_contact_mesh()
     r = mesh.r
-    half = lubjax.influence_matrix(mesh)
-    c = lubjax.force_weights(mesh)
+    half = lubjax.stepper.influence_matrix(mesh)
+    c = lubjax.stepper.force_weights(mesh)
     c0 = quad(lambda t: -_layer.transfer_minus_one(t, 0.5, "bonded"), 0, 60, limit=200)[0]
     A = 4 * c0 / (3 * math.pi)
     x = np.array([0.1, 0.15, 0.2, 0.25, 0.3, 0.35])
@@ -315,7 +315,7 @@ def test_dry_contact_on_a_thick_bonded_layer_matches_its_asymptotics():
 def _shull_table():
     mesh, W = _layer_contact_mesh()
     r = mesh.r
-    c = lubjax.force_weights(mesh)
+    c = lubjax.stepper.force_weights(mesh)
     rows = []
     for d in (0.04, 0.09, 0.16, 0.25, 0.36, 0.49, 0.64):
         p = _dry_contact(W, r, d)

@@ -97,6 +97,17 @@ def test_si_scales_is_what_every_si_class_and_the_fit_use():
         lubjax.si_scales(1.0, 1.0, 1.0)
 
 
+def test_the_fits_conversions_invert_si_scales():
+    """The fit's start (E* from β) and its spring (k in N/m to K̄) go through lubjax's units."""
+    E, R, dc, v, eta, k = 3.9e6, 2e-3, 1.4e-4, 2e-6, 90.0, 5e3
+    beta = lubjax.si_scales(E, R, dc, speed=v, viscosity=eta)["beta"]
+    assert lubjax.modulus_for_beta(beta, R, dc, speed=v, viscosity=eta) == pytest.approx(
+        E, rel=1e-14)
+    # K̄ is k in units of F_s/d_c
+    force = lubjax.si_scales(E, R, dc, speed=v)["force_N"]
+    assert lubjax.spring_stiffness_bar(k, E, R, dc) == pytest.approx(k * dc / force, rel=1e-14)
+
+
 def test_checks_let_tracers_through_and_name_what_is_allowed():
     @jax.jit
     def scaled(k):
@@ -114,6 +125,31 @@ def test_checks_let_tracers_through_and_name_what_is_allowed():
     assert lubjax.LAYER_BASES == ("bonded", "frictionless")
     with pytest.raises(ValueError, match=r"z0 values must be finite"):
         lubjax.sweep([1.0, 2.0], [0.5, np.nan])
+
+
+def test_array_and_setting_checks_name_the_parameter():
+    t = np.linspace(0.0, 1.0, 5)
+    with pytest.raises(ValueError, match="t and travel must be finite"):
+        lubjax.SampledTravel(t, np.where(t > 0.5, np.nan, t))
+    with pytest.raises(ValueError, match="t must be strictly increasing"):
+        lubjax.SampledTravel(t[::-1], t)
+    with pytest.raises(ValueError, match=r"breakpoints must be finite, got \(0.1, inf\)"):
+        lubjax.SampledTravel(t, t, breakpoints=(0.1, math.inf))
+    with pytest.raises(ValueError, match=r"Viscoelastic.times must be finite and > 0, got \[-1."):
+        lubjax.Viscoelastic((0.5,), (-1.0,))
+    with pytest.raises(ValueError, match=r"weight must be finite and >= 0 \(N\), got -1"):
+        lubjax.Collision(1e6, 1e-3, 1.0, 1e-3, 1e-3, 1e-5, weight=-1)
+    with pytest.raises(ValueError, match="weight must be a number in N, got 'heavy'"):
+        lubjax.Collision(1e6, 1e-3, 1.0, 1e-3, 1e-3, 1e-5, weight="heavy")
+    assert lubjax.Collision(1e6, 1e-3, 1.0, 1e-3, 1e-3, 1e-5, weight=0).weight == 0.0
+    with pytest.raises(ValueError, match="Settings.max_steps must be an integer >= 10, got 10.0"):
+        lubjax.Settings(max_steps=10.0)
+    with pytest.raises(ValueError, match="Settings.mesh_growth must be > 0 or None, got -1"):
+        lubjax.Settings(mesh_growth=-1)
+    with pytest.raises(ValueError, match=r"t_end must be finite and in \(0, 1e\+09\]"):
+        lubjax.make_plan(math.inf)
+    with pytest.raises(ValueError, match=r"times must lie in \[0, 2\], got \[3.\]"):
+        lubjax.make_plan(2.0, times=[3.0])
 
 
 def test_value_classes_unflatten_without_their_checks():
@@ -150,6 +186,7 @@ def test_public_surface():
     for name in lubjax.stepper.__all__:
         assert hasattr(lubjax.stepper, name), name
         assert name not in lubjax.__all__, name
+        assert not hasattr(lubjax, name), f"lubjax.{name}: the toolkit's home is lubjax.stepper"
     assert lubjax.stepper.__doc__
 
 

@@ -65,7 +65,7 @@ def test_results_do_not_depend_on_requested_times(order):
     np.testing.assert_array_equal(a.t, b.t)
     np.testing.assert_array_equal(a.force, b.force)
     # Profiles are the stepper's interpolant, consistent with the force read at those times.
-    weights = np.asarray(lubjax.force_weights(lubjax.Mesh(tuple(b.r))))
+    weights = np.asarray(lubjax.stepper.force_weights(lubjax.Mesh(tuple(b.r))))
     np.testing.assert_allclose(b.pressure @ weights, b.at([0.123, 1.0, 2.71]), rtol=1e-12)
     # Thousands of output times cost no steps.
     plan = lubjax.make_plan(3.0, settings=s, times=np.linspace(0, 3, 5000))
@@ -163,8 +163,8 @@ def test_step_budget_exhaustion_is_never_silent():
 
 
 def test_nan_parameters_stop_the_run_with_a_status():
-    disc = lubjax.discretise(lubjax.Settings(**COARSE).mesh())
-    traj = lubjax.rollout(disc, jnp.nan, 0.5, lubjax.RampHold(), 1.0)
+    disc = lubjax.stepper.discretise(lubjax.Settings(**COARSE).mesh())
+    traj = lubjax.stepper.rollout(disc, jnp.nan, 0.5, lubjax.RampHold(), 1.0)
     assert not bool(traj.finished)
     with pytest.raises(ValueError, match="beta"):
         lubjax.relax(float("nan"), 0.5)

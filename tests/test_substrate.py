@@ -89,9 +89,9 @@ def test_viscoelastic_gradients_reverse_equals_forward():
 
     def curve(p, mode):
         solid = lubjax.Viscoelastic.standard_linear_solid(p[0], p[1])
-        traj = lubjax.rollout(plan.disc, 50.0, 0.5, plan.drive, plan.t_end, plan.tol,
+        traj = lubjax.stepper.rollout(plan.disc, 50.0, 0.5, plan.drive, plan.t_end, plan.tol,
                               substrate=solid, mode=mode)  # fmt: skip
-        return lubjax.evaluate(traj.steps, plan.t, "force")
+        return lubjax.stepper.evaluate(traj.steps, plan.t, "force")
 
     p0 = jnp.array([3.0, 0.7])
     rev = jax.jacrev(lambda p: curve(p, "reverse"))(p0)
