@@ -20,6 +20,7 @@ import time
 import numpy as np
 
 from ._cli_options import (
+    POISSON_TEXT,
     accuracy_settings,
     add_accuracy_options,
     add_cache_flag,
@@ -166,7 +167,7 @@ def _add_relax_command(sub):
     si.add_argument("--E-star", type=float, help="plane-strain modulus E* [Pa] (with --substrate "
                     "viscoelastic: the relaxed E*∞)")
     si.add_argument("--E", type=float, help="Young's modulus [Pa] (with --poisson)")
-    si.add_argument("--poisson", type=float, help="Poisson's ratio in (-1, 0.5] (with --E)")
+    si.add_argument("--poisson", type=float, help=f"Poisson's ratio in {POISSON_TEXT} (with --E)")
     si.add_argument("--viscosity", type=float, help="film viscosity [Pa s]")
     si.add_argument("--radius", type=float, help="sphere radius [m]")
     si.add_argument("--speed", type=float, help="approach speed v0 [m/s]")
@@ -230,7 +231,7 @@ def _add_material(p):
     si.add_argument("--E-star", type=float, help="plane-strain modulus E* [Pa] (with --substrate "
                     "viscoelastic: the relaxed E*∞)")
     si.add_argument("--E", type=float, help="Young's modulus [Pa] (with --poisson)")
-    si.add_argument("--poisson", type=float, help="Poisson's ratio in (-1, 0.5] (with --E)")
+    si.add_argument("--poisson", type=float, help=f"Poisson's ratio in {POISSON_TEXT} (with --E)")
     si.add_argument("--viscosity", type=float, help="film viscosity [Pa s]")
     si.add_argument("--radius", type=float, help="sphere radius [m]")
 

@@ -21,8 +21,11 @@ from __future__ import annotations
 import argparse
 import math
 
-from ._checks import LAYER_BASES, check_poisson
+from ._checks import LAYER_BASES, POISSON_RANGE, check_poisson
 from ._files import UsageError
+
+#: Poisson's range as the help and messages write it.
+POISSON_TEXT = f"({POISSON_RANGE[0]:g}, {POISSON_RANGE[1]:g}]"
 
 SUBSTRATES = ("halfspace", "layer", "viscoelastic")
 LAYER_OPTIONS = ("thickness", "layer_base", "layer_poisson")
@@ -92,7 +95,7 @@ def add_substrate_options(group) -> None:
                        help=f"layer on its rigid base: {DEFAULT_LAYER_BASE} (default) or "
                        "frictionless")
     group.add_argument("--layer-poisson", type=float, default=None,
-                       help="Poisson ratio of the layer in (-1, 0.5] (default: --poisson if "
+                       help=f"Poisson ratio of the layer in {POISSON_TEXT} (default: --poisson if "
                        f"given, else {DEFAULT_LAYER_POISSON:g})")
 
 
@@ -171,5 +174,5 @@ def layer_poisson(args) -> float:
     try:
         check_poisson("--layer-poisson", nu)
     except ValueError:
-        raise UsageError(f"--layer-poisson must be in (-1, 0.5], got {nu:g}") from None
+        raise UsageError(f"--layer-poisson must be in {POISSON_TEXT}, got {nu:g}") from None
     return nu
