@@ -88,11 +88,12 @@ def _scenes(quick: bool):
         loop = importlib.import_module("lubjax._stepper")
         if not hasattr(loop, "_initial_state"):  # the loop in its own module
             loop = importlib.import_module("lubjax._rollout")
-        disc = lj.stepper.discretise(lj.uniform_mesh(0.05, 10.0))
+        toolkit = getattr(lj, "stepper", lj)  # (older revisions export it at the top level)
+        disc = toolkit.discretise(lj.uniform_mesh(0.05, 10.0))
         out = []
         for substrate in (lj.HalfSpace(), visco(lj)):
             for order in (2, 3):
-                tol = lj.stepper.Tolerance(order=order)
+                tol = toolkit.Tolerance(order=order)
                 shape = jax.eval_shape(
                     lambda s, t: loop._initial_state(disc, 100.0, lj.Travel(), s, 0.5, t,
                                                      jnp.zeros((0,))), substrate, tol)
