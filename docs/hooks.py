@@ -1,9 +1,10 @@
-"""mkdocs hooks: serve the figures that the benchmarks and examples write, from where they are,
-and drop the Sphinx roles that docstrings put before their cross-references.
+"""mkdocs hooks: serve the figures the examples write, from where they are, and drop the Sphinx
+roles that docstrings put before their cross-references.
 
-The PNGs live in ``benchmarks/out/`` and ``examples/out/`` (their scripts write them there); a
-copy under ``docs/`` would go stale the next time a script is re-run. Pages refer to them as
-``figures/<name>.png``.
+The examples' PNGs live in ``examples/out/`` (their scripts write them there); the benchmarks'
+figures the pages show are kept in ``docs/figures/`` (benchmark outputs are not committed: a
+benchmark re-run that changes a figure is copied there with the page's table). Pages refer to
+both as ``figures/<name>.png``.
 """
 
 import re
@@ -11,7 +12,7 @@ from pathlib import Path
 
 from mkdocs.structure.files import File
 
-FIGURE_DIRS = ("benchmarks/out", "examples/out")
+FIGURE_DIRS = ("examples/out",)
 
 #: A Sphinx role before inline code, as the docstrings write cross-references
 #: (":func:`relax`"); mkdocstrings renders the code but leaves the role as text.

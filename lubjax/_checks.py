@@ -84,6 +84,17 @@ def check_positive_or_none(name, value):
     return value
 
 
+def check_auto_none_or_below(name, value, bound, bound_name: str):
+    """"auto", None, or a real number in [0, ``bound``) (named ``bound_name`` in the message)."""
+    if not (value is None or value == "auto" or (
+        isinstance(value, numbers.Real) and not isinstance(value, bool) and 0 <= value < bound
+    )):
+        raise ValueError(
+            f"{name} must be 'auto', None or in [0, {bound_name} = {bound:g}), got {value!r}"
+        )
+    return value
+
+
 def check_int_at_least(name, value, lo: int) -> int:
     """A Python int (not a bool) ≥ ``lo``."""
     if isinstance(value, bool) or not isinstance(value, int) or value < lo:

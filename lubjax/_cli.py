@@ -41,6 +41,7 @@ from ._files import (
     atomic_open,
     check_outputs,
     prepare_outputs,
+    read_load_csv,
     run_cli,
 )
 
@@ -386,47 +387,6 @@ def _settings(args):
     from ._solve import Settings
 
     return Settings(**accuracy_settings(args))
-
-
-def read_load_csv(path):
-    """(time_s, force_N) from a CSV with a header line naming time_s and force_N; a malformed
-    value names its line and column."""
-    from ._files import UsageError as _UE
-
-    try:
-        with open(path, encoding="utf-8-sig") as f:
-            lines = f.read().splitlines()
-    except (OSError, UnicodeDecodeError) as e:
-        raise _UE(f"--load-csv {path}: cannot read it ({e})") from None
-    rows = [(i + 1, ln) for i, ln in enumerate(lines) if ln.strip() and not ln.startswith("#")]
-    if not rows:
-        raise _UE(f"{path}: no data")
-    header = [h.strip() for h in rows[0][1].split(",")]
-    if "time_s" not in header or "force_N" not in header:
-        raise _UE(f"{path}:{rows[0][0]}: the header must name time_s and force_N, got {header}")
-    it, jf = header.index("time_s"), header.index("force_N")
-    t, f = [], []
-    for lineno, ln in rows[1:]:
-        cells = ln.split(",")
-        if len(cells) != len(header):
-            raise _UE(f"{path}:{lineno}: {len(cells)} columns, the header has {len(header)}")
-        for col, out in ((it, t), (jf, f)):
-            try:
-                v = float(cells[col])
-            except ValueError:
-                raise _UE(
-                    f"{path}:{lineno}: column {col + 1} ({header[col]}) is not a number: "
-                    f"{cells[col].strip()!r}"
-                ) from None
-            if not math.isfinite(v):
-                raise _UE(f"{path}:{lineno}: column {col + 1} ({header[col]}) is {v}")
-            out.append(v)
-    t, f = np.asarray(t), np.asarray(f)
-    if t.size < 2 or np.any(np.diff(t) <= 0):
-        raise _UE(f"{path}: time_s must increase strictly over at least two rows")
-    if f.max() <= 0 or f.min() < 0:
-        raise _UE(f"{path}: force_N must be >= 0 with a positive peak (a compressive load)")
-    return t, f
 
 
 def _result_json(res, test=None, z0_m=None):

@@ -8,6 +8,8 @@
   target only once everything is written: a failed write leaves the old file as it was.
 * :class:`Parser` and :func:`run_cli` give each failure one line on stderr and an exit status:
   ``EXIT_USAGE`` (2) for bad usage or input, ``EXIT_FAILED`` (1) for a run that failed.
+* :func:`read_load_csv` reads the load history of ``lubjax creep --load-csv`` (the traces of
+  ``lubjax-fit`` are read by :mod:`fitting._io`, which lubjax does not import).
 
 The options the two command lines share are in :mod:`lubjax._cli_options`; ``fitting`` may
 import both modules.
@@ -17,12 +19,15 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import os
 import re
 import stat
 import sys
 import tempfile
 import traceback
+
+import numpy as np
 
 EXIT_OK = 0
 EXIT_FAILED = 1  # the run failed: solver error, fit not converged, an output not written
@@ -284,3 +289,43 @@ def save_figure(fig, path, **kwargs) -> None:
     fmt = plot_format(os.fspath(path))
     with atomic_open(path, "wb") as fh:
         fig.savefig(fh, format=fmt, **kwargs)
+
+
+def read_load_csv(path):
+    """(time_s, force_N) from a CSV with a header line naming time_s and force_N; a malformed
+    value names its line and column."""
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            lines = f.read().splitlines()
+    except (OSError, UnicodeDecodeError) as e:
+        raise UsageError(f"--load-csv {path}: cannot read it ({e})") from None
+    rows = [(i + 1, ln) for i, ln in enumerate(lines) if ln.strip() and not ln.startswith("#")]
+    if not rows:
+        raise UsageError(f"{path}: no data")
+    header = [h.strip() for h in rows[0][1].split(",")]
+    if "time_s" not in header or "force_N" not in header:
+        raise UsageError(
+            f"{path}:{rows[0][0]}: the header must name time_s and force_N, got {header}")
+    it, jf = header.index("time_s"), header.index("force_N")
+    t, f = [], []
+    for lineno, ln in rows[1:]:
+        cells = ln.split(",")
+        if len(cells) != len(header):
+            raise UsageError(f"{path}:{lineno}: {len(cells)} columns, the header has {len(header)}")
+        for col, out in ((it, t), (jf, f)):
+            try:
+                v = float(cells[col])
+            except ValueError:
+                raise UsageError(
+                    f"{path}:{lineno}: column {col + 1} ({header[col]}) is not a number: "
+                    f"{cells[col].strip()!r}"
+                ) from None
+            if not math.isfinite(v):
+                raise UsageError(f"{path}:{lineno}: column {col + 1} ({header[col]}) is {v}")
+            out.append(v)
+    t, f = np.asarray(t), np.asarray(f)
+    if t.size < 2 or np.any(np.diff(t) <= 0):
+        raise UsageError(f"{path}: time_s must increase strictly over at least two rows")
+    if f.max() <= 0 or f.min() < 0:
+        raise UsageError(f"{path}: force_N must be >= 0 with a positive peak (a compressive load)")
+    return t, f

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import numbers
 import time
 import warnings
 from typing import NamedTuple
@@ -14,6 +13,7 @@ import numpy as np
 
 from . import _compiler
 from ._checks import (
+    check_auto_none_or_below,
     check_choice,
     check_int_at_least,
     check_parameters,
@@ -136,14 +136,8 @@ class Settings:
         check_int_at_least("Settings.max_steps", self.max_steps, 10)
         for name in ("dr", "length", "mesh_growth"):
             check_positive_or_none(f"Settings.{name}", getattr(self, name))
-        c = self.contact_radius
-        if not (c is None or c == "auto" or (
-            isinstance(c, numbers.Real) and not isinstance(c, bool) and 0 <= c < self.r_fine
-        )):
-            raise ValueError(
-                f"Settings.contact_radius must be 'auto', None or in [0, r_fine = "
-                f"{self.r_fine:g}), got {c!r}"
-            )
+        check_auto_none_or_below("Settings.contact_radius", self.contact_radius, self.r_fine,
+                                 "r_fine")
 
     def mesh_parameters(self) -> tuple[float, float, float]:
         dr, growth, length = mesh_from_tolerance(self.rtol)
