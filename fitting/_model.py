@@ -68,7 +68,6 @@ from lubjax._fitting_api import sharding as _sharding
 from ._io import Trace, check_force_sign
 
 DRIVES = ("travel", "spring", "force")
-LAYER_BASES = lubjax.LAYER_BASES
 
 #: Accuracy of the model inside fits: the solver's own error control at rtol = 3e-4 (132
 #: nodes; the solver's default 1e-4 has 177). At 1e-3 the model of paper_dc140 at the true
