@@ -226,12 +226,13 @@ def film_scale(level, previous, disc, face_flux, rtol, elapsed, film_error: str)
 
 
 def error_ratio(estimate, level, previous, peaks: Peaks, tol: Tolerance, drive, gap_start,
-                film_scale_=None):
+                film):
     """ε = the largest of the scaled Milne estimates (≤ 1: within tolerance).
 
     ``estimate``: the step's error estimates (film at every node, force, gap, velocity);
     ``level`` the candidate, ``previous`` the last accepted level (both :class:`Level`);
-    ``gap_start``: z̄ at t̄_start.
+    ``gap_start``: z̄ at t̄_start; ``film``: what the film's error is measured against at each
+    node (:func:`film_scale`).
 
     * Film: |e| ≤ atol + rtol · max(|h̄ⁿ⁺¹|, |h̄ⁿ|) at every node.
     * Force: rtol relative to itself down to force_floor × its peak so far, and to rtol × that
@@ -256,9 +257,7 @@ def error_ratio(estimate, level, previous, peaks: Peaks, tol: Tolerance, drive, 
     * A free sphere's velocity is a state of its own ODE: held relative to the largest speed so
       far (it passes through zero at the turning point).
     """
-    if film_scale_ is None:
-        film_scale_ = jnp.maximum(jnp.abs(level.film), jnp.abs(previous.film))
-    scale_h = tol.atol + tol.rtol * film_scale_
+    scale_h = tol.atol + tol.rtol * film
     force, force_prev = level.force, previous.force
     magnitude = jnp.maximum(
         jnp.maximum(jnp.abs(force), jnp.abs(force_prev)), tol.force_floor * peaks.force

@@ -132,8 +132,10 @@ def _ratio(force_error, force, peak, drive=_Drive, gap_error=0.0, gap=0.5, excur
     est = Estimate(film=jnp.zeros(4), force=jnp.asarray(force_error),
                    gap=jnp.asarray(gap_error), velocity=jnp.asarray(0.0))
     peaks = ctrl.Peaks(jnp.asarray(peak), jnp.asarray(0.0), jnp.asarray(excursion))
-    return float(ctrl.error_ratio(est, _level(force, gap=gap), _level(force), peaks, TOL,
-                                  drive, jnp.asarray(0.5)))
+    level, previous = _level(force, gap=gap), _level(force)
+    film = jnp.maximum(jnp.abs(level.film), jnp.abs(previous.film))  # the relative control
+    return float(ctrl.error_ratio(est, level, previous, peaks, TOL, drive, jnp.asarray(0.5),
+                                  film))
 
 
 def test_error_norm_holds_the_force_relative_to_itself():
