@@ -240,7 +240,8 @@ def _solve_two_stages(disc, beta, conductance, record: StepRecord, row, loads):
     """The step's solve and the mobility's second stage on the same factors: the conductances
     of the film the first stage gives, g(h̄ⁿ⁺¹), replace the extrapolated ones g(h̄*) by one
     simplified-Newton correction M δ = (T(g(h̄ⁿ⁺¹)) - T(g(h̄*))) p̄ⁿ⁺¹. Returns p̄ⁿ⁺¹, Δz̄, the
-    new conductances and the outer flux."""
+    new conductances, the outer flux and the gap's history sum (the velocity's BDF formula needs
+    it)."""
     history, (a0, _, a2, a3) = record.history, record.weights
     # Σ_j a_j z̄ⁿ⁺¹⁻ʲ = a₀Δz̄ + gap_history in the solved steps (Σ a_j = 0):
     # -a₂Δz̄ⁿ (BDF2), -a₂Δz̄ⁿ - a₃(Δz̄ⁿ + Δz̄ⁿ⁻¹) (BDF3)
