@@ -35,6 +35,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from ._mesh import DEFAULT_RTOL
 from ._pytree import register
 
 SAFETY = 0.9
@@ -73,7 +74,7 @@ class Tolerance:
         (:func:`film_scale`).
     """
 
-    rtol: float = 1e-4
+    rtol: float = DEFAULT_RTOL
     atol: float = 1e-9
     initial_step: float = 1e-5
     order: int = 2
@@ -84,6 +85,7 @@ class Tolerance:
 
 register(Tolerance, data=("rtol", "atol", "initial_step", "force_floor"),
          static=("order", "max_steps", "film_error"))
+#: The tolerance's defaults: :class:`lubjax.Settings` takes its own from here.
 DEFAULT_TOLERANCE = Tolerance()
 
 

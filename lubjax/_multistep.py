@@ -18,8 +18,10 @@ t_{n+1}) C_p y^{(k+1)}, with
 so the corrector's error is C_c/(C_p - C_c) × (corrector - predictor), at no extra solve. For
 constant BDF2 steps this is the classical -2/11.
 
-The closed forms below are those the stepper has always used (their rounding fixes the step
-sequences); tests/test_multistep.py checks each against :func:`lagrange` and its derivative.
+The weights and the predictor are closed forms rather than calls of :func:`lagrange`: their
+rounding fixes the step sequences (a generic evaluation moves the error estimate at the last ulp
+and can flip an accept/reject near ε = 1). tests/test_multistep.py checks each against an
+independent Lagrange construction.
 """
 
 from __future__ import annotations

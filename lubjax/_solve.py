@@ -22,11 +22,11 @@ from ._checks import (
     check_t_end,
     check_times,
 )
-from ._controller import DONE, Tolerance, stop_reason
+from ._controller import DEFAULT_TOLERANCE, DONE, Tolerance, stop_reason
 from ._discretisation import Discretisation, discretise
 from ._drives import as_drive
 from ._indenter import RampHold, SampledTravel
-from ._mesh import DEFAULT_RTOL, Mesh, graded_mesh, mesh_for, mesh_from_tolerance
+from ._mesh import Mesh, graded_mesh, mesh_for, mesh_from_tolerance
 from ._rollout import Step, evaluate, evaluate_host, rollout
 from ._substrate import HalfSpace, as_substrate
 from ._threads import single_threaded_blas
@@ -109,17 +109,17 @@ class Settings:
         ```
     """
 
-    rtol: float = DEFAULT_RTOL
-    atol: float = 1e-9
+    rtol: float = DEFAULT_TOLERANCE.rtol
+    atol: float = DEFAULT_TOLERANCE.atol
     dr: float | None = None
     r_fine: float = 1.6
     length: float | None = None
     mesh_growth: float | None = None
-    order: int = 2
-    initial_step: float = 1e-5
-    max_steps: int = 20_000
-    force_floor: float = 1e-8
-    film_error: str = "relative"
+    order: int = DEFAULT_TOLERANCE.order
+    initial_step: float = DEFAULT_TOLERANCE.initial_step
+    max_steps: int = DEFAULT_TOLERANCE.max_steps
+    force_floor: float = DEFAULT_TOLERANCE.force_floor
+    film_error: str = DEFAULT_TOLERANCE.film_error
     error_estimate: bool = True
     contact_radius: float | str | None = "auto"
     rim_refinement: float = 14.0

@@ -21,7 +21,7 @@ a₀q_kⁿ⁺¹ + a₁q_kⁿ + a₂q_kⁿ⁻¹ = Δt̄ (J_k p̄ⁿ⁺¹ - q_kⁿ
     c = J₀ + Σ_k (Δt̄J_k/λ_k)/(a₀ + Δt̄/λ_k),
 
 so every step is still one linear solve (the elastic block scaled by c); an elastic substrate
-gives c = 1 and ū = p̄ exactly, the same arithmetic as before. Dimensionless numbers use the
+gives c = 1 and ū = p̄ exactly, the elastic arithmetic. Dimensionless numbers use the
 *relaxed* modulus E*∞ (β, p̄, F̄ of eqs 7-8 with E* = E*∞): the relaxed limit (λ → 0) is the
 elastic solver at E*∞, the instantaneous one (λ → ∞) the elastic solver at E*₀ = E*∞/J₀.
 """
@@ -127,8 +127,8 @@ def _history_sum(weights, levels):
 
 
 def _elastic_step_loads(step) -> StepLoads:
-    """ū = p̄: no memory (K = 0). The arithmetic the stepper had before substrates, bit for bit
-    (adding zero memory terms changes the rounding, and fits' convergence with it)."""
+    """ū = p̄: no memory (K = 0), and no zero memory terms added (they would change the
+    rounding, and fits' convergence with it)."""
     memory = step.history.memory[0]
     return StepLoads(None, _history_sum(step.weights, step.history.elastic_load),
                      lambda p: (memory, p))
