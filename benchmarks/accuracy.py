@@ -121,7 +121,7 @@ def main(argv=None):
     ap.add_argument("--dr", type=float, default=None, help="fine-zone mesh spacing of the runs")
     ap.add_argument("--contact-radius", default=None, choices=("auto",),
                     help="refine the checked runs at the contact edge (Settings.contact_radius)")
-    ap.add_argument("--film-error", default=None, choices=("relative", "flux"),
+    ap.add_argument("--film-error", default=None, choices=("force", "relative"),
                     help="what the checked runs measure the film's error against "
                     "(Settings.film_error)")
     ap.add_argument("--betas", type=float, nargs="*", default=None)

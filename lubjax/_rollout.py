@@ -179,8 +179,7 @@ def _attempt(disc, beta, z0, drive, substrate, t_end, tol: Tolerance, profile_ti
     order = ctrl.choose_order(controller, previous.force, state.peaks, tol.order)
     candidate = step(disc, beta, drive, substrate, state.history, t, t_new, order, tol.order)
     gap_start = jnp.asarray(drive.initial_gap(z0), candidate.level.gap.dtype)
-    film_scale = ctrl.film_scale(candidate.level, previous, disc, candidate.face_flux, tol.rtol,
-                                 t_new - drive.t_start, tol.film_error)
+    film_scale = ctrl.film_scale(candidate.level, previous, tol.film_error)
     ratio = ctrl.error_ratio(candidate.estimate, candidate.level, previous, state.peaks, tol,
                              drive, gap_start, film_scale)
     valid = ctrl.admissible(candidate.level, state.peaks, drive)

@@ -69,12 +69,12 @@ class Settings:
         force_floor: the force is held to rtol relative to max(|F̄|, force_floor × its peak
             so far): pointwise down to 1e-8 of the peak by default. Raise it where a tail far
             below the peak does not matter (fits of noisy data: fitting.FIT_SETTINGS uses 1e-5).
-        film_error: what the film's local error is measured against (see
-            :func:`lubjax._controller.film_scale`): "relative" (default), the film itself at
-            every node; "flux", the film where it carries the flux the force feels and, inside
-            a near-dry contact, a looser scale (at most √rtol of the film per step): 2-3× fewer
-            steps for β ≥ 10⁶ with a contact (docs/accuracy.md, near-dry contacts), the thin
-            films there less accurate (``Result.unresolved_film()`` says where).
+        film_error: what the film's local error is measured against: "relative" (default),
+            the film itself at every node; "force", inside a contact of indentation δ_c the
+            larger of the film and 2δ_c/3 (the film's error then counts through the force it
+            moves: 2-6× fewer steps in near-dry contacts, β ≳ 10⁵, the force as accurate, the
+            thin films inside the contact less so; ``Result.unresolved_film()`` says where the
+            error estimate finds them off). The fits use "force": they read only the force.
         error_estimate: also run the nested coarse mesh (every other node) at rtol and at
             8·rtol, and return ``Result.force_error`` (about +55 % run time at the default).
         contact_radius: refine the mesh around this r̄ (units of √(R d_c); the Hertz contact's
@@ -132,7 +132,7 @@ class Settings:
         if not 1e-10 <= self.rtol <= 0.1:
             raise ValueError(f"Settings.rtol must be in [1e-10, 0.1], got {self.rtol}")
         check_choice("Settings.order", self.order, (1, 2, 3))
-        check_choice("Settings.film_error", self.film_error, ("relative", "flux"))
+        check_choice("Settings.film_error", self.film_error, ("force", "relative"))
         check_int_at_least("Settings.max_steps", self.max_steps, 10)
         for name in ("dr", "length", "mesh_growth"):
             check_positive_or_none(f"Settings.{name}", getattr(self, name))
@@ -419,17 +419,20 @@ class Result:
         return out
 
     def unresolved_film(self, fraction: float = 0.3) -> str | None:
-        """A note if the estimated error of min h̄ exceeds ``fraction`` of it anywhere (the mesh
-        does not resolve that film: late necks at large β t̄), else None. Not an error: the
-        force can still be accurate (it is Hertz's there)."""
+        """A note if the estimated error of min h̄ exceeds ``fraction`` of it anywhere, else
+        None. Not an error: the force can still be accurate (it is Hertz's there). Two causes:
+        the mesh may not resolve a late neck at large β t̄, and ``Settings.film_error="force"``
+        holds thin films inside a contact only through the force they move."""
         bad = self.film_min_error > fraction * np.abs(self.film_min)
         if not np.any(bad):
             return None
         i = int(np.argmax(bad))
         return (
             f"from t̄ = {self.t[i]:.4g} the thinnest film (h̄_min = {self.film_min[i]:.3g}) is "
-            f"below what the mesh resolves (estimated error {self.film_min_error[i]:.2g}); "
-            "refine Settings.dr (CLI: --dr) if the film matters"
+            f"not resolved (estimated error {self.film_min_error[i]:.2g}); the force can still "
+            "be. If the film matters: a finer Settings.dr (CLI: --dr) resolves a thin neck, and "
+            "Settings.film_error=\"relative\" (the default; CLI: --film-error relative) holds "
+            "thin films to rtol of themselves"
         )
 
 

@@ -135,7 +135,6 @@ class Candidate(NamedTuple):
     order: jax.Array
     outflow: jax.Array  # volume flux out through the last face over the step, per unit 2π
     dissipation: jax.Array  # viscous power D̄ = 2π Σ_faces g (Δp̄)²
-    face_flux: jax.Array  # β g (p̄_{i+1} - p̄_i) through each face, per unit 2π, (N-1,)
 
 
 def linear_step(
@@ -290,7 +289,6 @@ def step(disc: Discretisation, beta, drive, substrate, history: History, t, t_ne
         order=order,
         outflow=outflow,
         dissipation=2.0 * jnp.pi * jnp.sum(g * (p[1:] - p[:-1]) ** 2),
-        face_flux=g * (p[1:] - p[:-1]),
     )
 
 

@@ -427,3 +427,22 @@ def test_relax_json_carries_the_runs_problems_and_film_note(tmp_path):
                           "--rtol", "1e-3", "--out", str(out)]) == 0
     data = json.loads(out.read_text())
     assert data["ok"] and data["problems"] == [] and data["unresolved_film"] is None
+
+
+def test_relax_names_the_force_norm_in_a_near_dry_contact(tmp_path, capsys):
+    """β = 10⁶ indenting: relax says --film-error force exists; given it, the run says nothing
+    more, takes fewer steps (the JSON's count) and keeps the force (its peak within 1e-3)."""
+    import json
+
+    runs = {}
+    for mode in ("relative", "force"):
+        out = tmp_path / f"{mode}.json"
+        assert lcli.main(["relax", "--beta", "1e6", "--z0", "0.5", "--t-end", "1.2", "--rtol",
+                          "1e-3", "--film-error", mode, "--out", str(out)]) == 0
+        printed = capsys.readouterr().out
+        assert ("--film-error force" in printed) == (mode == "relative")
+        runs[mode] = json.loads(out.read_text())
+    assert runs["force"]["settings"]["film_error"] == "force"
+    assert runs["force"]["steps"] < runs["relative"]["steps"]
+    peaks = [max(runs[m]["force"]) for m in runs]
+    assert abs(peaks[0] - peaks[1]) < 1e-3 * peaks[0]
