@@ -341,7 +341,7 @@ def read_afm(path, *, radius=None, poisson=None, segments=("approach",), baselin
             constant-force dwell: segments approach and dwell).
 
     Returns:
-        A list of :class:`Trace`, one per curve kept (a force map gives one per curve).
+        list[Trace]: one per curve kept (a force map gives one per curve).
 
     Raises:
         TraceError: afmformats not installed (``pip install lubjax[afm]``), a file it

@@ -60,7 +60,7 @@ def coverage(draws, truth, settings=FIT_SETTINGS, **fit_kwargs):
         **fit_kwargs: passed on to :func:`fit_traces`.
 
     Returns:
-        A dict: ``table`` (per parameter of ``truth``: ``rms_z`` of the reported errors,
+        dict: ``table`` (per parameter of ``truth``: ``rms_z`` of the reported errors,
         ``rms_z_white`` of their white-noise part alone, ``mean_bias_over_se``,
         ``scatter_over_se`` and ``solver_over_se``, each over the mean reported error),
         ``converged`` (how many), ``n``, ``noise_models`` (those chosen) and ``lag1`` (the mean

@@ -307,7 +307,7 @@ def initial_guess(trace: Trace, scales: Scales, spec: ModelSpec | None = None) -
         spec: the :class:`ModelSpec`; None (default): the drive the trace's metadata names.
 
     Returns:
-        The :class:`Start`: a value per parameter of ``spec.names`` [SI] and notes on how
+        Start: a value per parameter of ``spec.names`` [SI] and notes on how
         each was found.
     """
     spec = ModelSpec(drive=_model.drive_of(trace)) if spec is None else spec
@@ -809,7 +809,7 @@ def fit_traces(
             except a shared one.
 
     Returns:
-        One :class:`FitResult` per trace, in the order of ``traces``: the values and 1-σ
+        list[FitResult]: one per trace, in the order of ``traces``, with the values and 1-σ
         errors in SI units (E* [Pa], η [Pa s], z0 [m], ...), the statistics, the flags and the
         model at the samples.
 
@@ -894,7 +894,7 @@ def fit_trace(trace: Trace, **kwargs) -> FitResult:
         **kwargs: as :func:`fit_traces`.
 
     Returns:
-        Its :class:`FitResult`.
+        FitResult: the fit.
 
     Raises:
         ValueError: as :func:`fit_traces`.

@@ -242,7 +242,7 @@ def make_trace(time, displacement, force, radius, metadata=None, name: str = "")
         name: where the trace came from (a label; default "").
 
     Returns:
-        The :class:`Trace` (``radius_m`` added to its metadata).
+        Trace: the trace (``radius_m`` added to its metadata).
 
     Raises:
         TraceError: a column not numeric, not 1-D, not finite, of another length or with a
@@ -748,7 +748,7 @@ def parse_trace(text: str, name: str = "<string>", *, columns=None, units=None,
             compression as negative).
 
     Returns:
-        The :class:`Trace`, in SI units (s, m, N).
+        Trace: the trace, in SI units (s, m, N).
 
     Raises:
         TraceError: malformed text (the message names ``name:line:column``), a ``columns``,
@@ -867,7 +867,7 @@ def read_trace(path, *, columns=None, units=None, force_sign: int = 1) -> Trace:
         force_sign: -1 flips the force, as :func:`parse_trace`.
 
     Returns:
-        The :class:`Trace`, in SI units (s, m, N).
+        Trace: the trace, in SI units (s, m, N).
 
     Raises:
         TraceError: a folder, a file over ``MAX_FILE_BYTES``, a file that cannot be read, or
@@ -910,7 +910,7 @@ def format_trace(trace: Trace) -> str:
         trace: the :class:`Trace`.
 
     Returns:
-        The text: ``# key: value`` lines, the header ``time_s,displacement_m,force_N`` and one
+        str: ``# key: value`` lines, the header ``time_s,displacement_m,force_N`` and one
         row per sample.
 
     Raises:

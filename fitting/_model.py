@@ -191,6 +191,15 @@ class Scales(NamedTuple):
         input_end: u_end, the final travel [m] or final load [N].
     """
 
+    indent: float
+    speed: float
+    radius: float
+    t_on: float
+    time_scale: float
+    t_end_motion: float
+    response_unit: float
+    input_end: float
+
     def beta(self, E_star, viscosity):
         """β of a modulus and viscosity on these scales (eq 8e with v0 = d_c/t_c).
 
@@ -250,7 +259,7 @@ def scales_from_trace(trace: Trace, drive: str | None = None) -> Scales:
             metadata, else "travel".
 
     Returns:
-        The :class:`Scales`.
+        Scales: the trace's scales.
 
     Raises:
         ValueError: the input does not ramp up (and, under load control, settle into a hold),
@@ -342,6 +351,20 @@ class TraceData(NamedTuple):
         disc: a layer's own discretisation (its influence matrix), or None: the solver's.
     """
 
+    history: lubjax.SampledTravel
+    t_end: jax.Array
+    t_data: jax.Array
+    response: jax.Array
+    weight: jax.Array
+    log_beta_unit: jax.Array
+    indent: jax.Array
+    time_scale: jax.Array
+    force_scale_unit: jax.Array
+    response_unit: jax.Array
+    noise: jax.Array
+    drive_unit: jax.Array
+    disc: lubjax.stepper.Discretisation | None
+
 
 class Solver(NamedTuple):
     """What every trace of a batch shares: the mesh arrays and the tolerance (its numbers are
@@ -379,7 +402,7 @@ def make_solver(settings=None) -> Solver:
         settings: a ``lubjax.Settings``; None (default): ``FIT_SETTINGS``.
 
     Returns:
-        The :class:`Solver`.
+        Solver: the shared mesh arrays and tolerance.
     """
     settings = FIT_SETTINGS if settings is None else settings
     return Solver(lubjax.stepper.discretise(settings.mesh()), settings.tolerance())
@@ -420,7 +443,7 @@ def trace_data(
         n_history: pad the input history to this many samples likewise; None: no padding.
 
     Returns:
-        The :class:`TraceData`.
+        TraceData: the trace's arrays.
     """
     n = trace.time.size
     n_pad = n if n_pad is None else n_pad

@@ -68,7 +68,7 @@ def discretise(mesh: Mesh, substrate=None) -> Discretisation:
             ``Viscoelastic`` (its elastic geometry).
 
     Returns:
-        The :class:`Discretisation`, float64 arrays on the default device.
+        Discretisation: float64 arrays on the default device.
 
     Raises:
         TypeError: ``substrate`` is not a substrate.

@@ -70,7 +70,7 @@ class RampHold:
             t: t̄ (units of t_c); a scalar or an array.
 
         Returns:
-            d̄(t̄) (units of d_c), shaped as ``t``: t̄ + t̄²/(2t̄₁) on [-t̄₁, 0), t̄ on [0, 1),
+            jax.Array: d̄(t̄) (units of d_c), shaped as ``t``; t̄ + t̄²/(2t̄₁) on [-t̄₁, 0), t̄ on [0, 1),
             1 after.
         """
         t = jnp.asarray(t)
@@ -149,7 +149,7 @@ class SampledTravel:
             t: t̄ (units of t_c); a scalar or an array.
 
         Returns:
-            d̄(t̄) (units of d_c), shaped as ``t``: the monotone cubic through the samples,
+            jax.Array: d̄(t̄) (units of d_c), shaped as ``t``; the monotone cubic through the samples,
             constant before the first and after the last.
         """
         t = jnp.asarray(t)

@@ -145,7 +145,7 @@ def force_weights(mesh: Mesh) -> np.ndarray:
         mesh: the :class:`lubjax.Mesh`.
 
     Returns:
-        c, a float64 array of N weights (units: F̄ per unit p̄ at each node).
+        numpy.ndarray: c, N float64 weights (F̄ per unit p̄ at each node).
     """
     r = mesh.r
     a, b = r[:-1, None], r[1:, None]

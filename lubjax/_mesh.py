@@ -63,7 +63,7 @@ class Mesh:
         """The nested mesh of every other node, the outer node kept (for error estimates).
 
         Returns:
-            The coarser :class:`Mesh`.
+            Mesh: the coarser mesh.
         """
         nodes = self.nodes[::2]
         if nodes[-1] != self.nodes[-1]:
@@ -79,7 +79,7 @@ def uniform_mesh(dr: float, length: float) -> Mesh:
         length: L̄, the domain length (units of √(R d_c)), rounded to a whole number of cells.
 
     Returns:
-        The :class:`Mesh`.
+        Mesh: the mesh.
 
     Raises:
         ValueError: not 0 < dr < length.
@@ -136,7 +136,7 @@ def graded_mesh(
             max(r̄ - rim, 0)).
 
     Returns:
-        The :class:`Mesh`.
+        Mesh: the mesh.
 
     Raises:
         ValueError: a spacing, edge, growth or refinement out of the ranges above.
@@ -311,7 +311,7 @@ def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
         t_end: its final time t̄ (units of t_c), in (0, 1e9].
 
     Returns:
-        The :class:`Mesh`.
+        Mesh: the mesh.
 
     Raises:
         TypeError: ``drive`` is not a drive.

@@ -297,7 +297,7 @@ def rollout(
             ``lax.scan`` over ``tol.max_steps`` attempts: also vjp and ``jax.grad``).
 
     Returns:
-        The :class:`Trajectory`.
+        Trajectory: the step entries, profiles and final status.
 
     Raises:
         ValueError: an unknown ``mode``, or ``tol.order`` not 1, 2 or 3.
@@ -378,7 +378,7 @@ def evaluate(steps: Step, times, field: str = "force"):
             "film_center", "outflow", "gap", "velocity", "elastic_energy" or "dissipation".
 
     Returns:
-        The field at ``times`` (a JAX array shaped as ``times``): NaN past the end of the run,
+        jax.Array: the field at ``times``, shaped as ``times``; NaN past the end of the run,
         the initial value before its start.
     """
     return _evaluate(jnp, steps, times, field)
@@ -395,7 +395,7 @@ def evaluate_host(steps: Step, times, field: str = "force") -> np.ndarray:
         field: a per-step series of :class:`Step`, as for :func:`evaluate` (default "force").
 
     Returns:
-        The field at ``times``, a float64 NumPy array shaped as ``times``.
+        numpy.ndarray: the field at ``times``, float64, shaped as ``times``.
     """
     steps = Step(*(np.asarray(a) for a in steps))
     return _evaluate(np, steps, np.asarray(times, np.float64), field)

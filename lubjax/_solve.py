@@ -171,7 +171,7 @@ class Settings:
                 ``Settings.rim_refinement``. :func:`relax` passes what the run needs.
 
         Returns:
-            The :class:`lubjax.Mesh`.
+            lubjax.Mesh: the mesh.
 
         Raises:
             ValueError: a radius or factor :func:`lubjax.graded_mesh` refuses.
@@ -193,7 +193,7 @@ class Settings:
         """The step controller's part of the settings.
 
         Returns:
-            The :class:`lubjax.stepper.Tolerance` (rtol, atol, initial_step, order, max_steps,
+            lubjax.stepper.Tolerance: rtol, atol, initial_step, order, max_steps,
             force_floor, film_error).
         """
         return Tolerance(
@@ -259,7 +259,7 @@ def make_plan(
             spaced times from the drive's start to ``t_end``).
 
     Returns:
-        The :class:`Plan`, the fixed (not differentiated) half of :func:`force_curve`'s inputs.
+        Plan: the fixed (not differentiated) half of :func:`force_curve`'s inputs.
 
     Raises:
         ValueError: both ``history`` and ``drive``, a ``t_end`` not after the start, or
@@ -486,8 +486,8 @@ class Result:
         """What is wrong with the run, in words (empty when :attr:`ok`).
 
         Returns:
-            One sentence per problem: NaN or inf, a negative film (where and how thin), a run
-            that stopped before ``t_end`` (where and why).
+            list[str]: one sentence per problem, NaN or inf, a negative film (where and how
+            thin), a run that stopped before ``t_end`` (where and why).
         """
         out = []
         if not self.finite:
@@ -598,7 +598,7 @@ def relax(
             command line's progress line shows it.
 
     Returns:
-        The :class:`Result`: F̄, the gap and min h̄ at every accepted step, the profiles at
+        Result: F̄, the gap and min h̄ at every accepted step, the profiles at
         ``profile_times``, the estimated errors (with ``Settings.error_estimate``) and the flags.
 
     Raises:

@@ -85,7 +85,7 @@ class HalfSpace:
             step: the step being taken (``lubjax._stepper.StepRecord``).
 
         Returns:
-            The ``StepLoads`` (compliance None: c = 1).
+            StepLoads: with compliance None (c = 1).
         """
         return _elastic_step_loads(step)
 
@@ -155,7 +155,7 @@ class Layer:
             step: the step being taken (``lubjax._stepper.StepRecord``).
 
         Returns:
-            The ``StepLoads`` (compliance None: c = 1).
+            StepLoads: with compliance None (c = 1).
         """
         return _elastic_step_loads(step)
 
@@ -243,7 +243,7 @@ class Viscoelastic:
             elastic: ``HalfSpace()`` (None, the default) or a ``Layer``.
 
         Returns:
-            The :class:`Viscoelastic`.
+            Viscoelastic: the substrate.
 
         Raises:
             ValueError: ``stiffening`` not > 1 or ``relaxation_time`` not > 0.
@@ -276,7 +276,7 @@ class Viscoelastic:
             elastic: ``HalfSpace()`` (None, the default) or a ``Layer``.
 
         Returns:
-            The :class:`Viscoelastic`.
+            Viscoelastic: the substrate.
 
         Raises:
             ValueError: ``moduli`` and ``times`` not 1-D of one length, not finite and > 0,
@@ -330,7 +330,7 @@ class Viscoelastic:
         """The creep compliance in the stepper's form, J(t̄) = J₀ + Σ J_k (1 - e^{-t̄/λ_k}).
 
         Returns:
-            (J₀, J_k, λ_k): J₀ = 1 - Σ J_k and the two arrays, as JAX values.
+            tuple: (J₀, J_k, λ_k), J₀ = 1 - Σ J_k and the two arrays, as JAX values.
         """
         ret = jnp.asarray(self.retardation)
         return 1.0 - jnp.sum(ret), ret, jnp.asarray(self.times)
@@ -345,7 +345,7 @@ class Viscoelastic:
             step: the step being taken (``lubjax._stepper.StepRecord``).
 
         Returns:
-            The ``StepLoads``: c = J₀ + Σ_k (Δt̄J_k/λ_k)/(a₀ + Δt̄/λ_k), the known part and
+            StepLoads: c = J₀ + Σ_k (Δt̄J_k/λ_k)/(a₀ + Δt̄/λ_k), the known part and
             p̄ⁿ⁺¹ ↦ (qⁿ⁺¹, ūⁿ⁺¹).
         """
         j0, jk, lam = self.compliance()

@@ -147,7 +147,7 @@ def sweep(
             until its slowest member is done) or "auto".
 
     Returns:
-        A :class:`SweepResult`: the flattened pairs, ``t``, ``force``, ``film_min`` and ``gap``
+        SweepResult: the flattened pairs, ``t``, ``force``, ``film_min`` and ``gap``
         of shape (pairs, times), ``ok`` and the accepted steps per pair, the compile and run
         times.
 

@@ -26,7 +26,7 @@ def si_scales(E_star, radius, d_c, *, t_c=None, speed=None, viscosity=None) -> d
         viscosity: η, film viscosity [Pa s]; with it the result also holds β.
 
     Returns:
-        A dict: ``time_s`` (t = t_c t̄), ``length_m`` (r = √(R d_c) r̄), ``gap_m`` (d_c),
+        dict: ``time_s`` (t = t_c t̄), ``length_m`` (r = √(R d_c) r̄), ``gap_m`` (d_c),
         ``pressure_Pa`` ((2E*/π) √(d_c/R), eq 7), ``force_N`` (F_s = 2E* d_c^{3/2} √R/π,
         eq 11b) and, with a ``viscosity``, ``beta`` = E* d_c^{5/2}/(6π η v R^{3/2}) (eq 8e),
         written with whichever of ``t_c`` and ``speed`` was given, so it rounds as written.
@@ -219,7 +219,7 @@ class RelaxationTest(_Scene):
             **kw: the other fields (``radius``, ``viscosity``, ``speed``, ``indent``, ``gap``).
 
         Returns:
-            The :class:`RelaxationTest` with E* = E/(1 - ν²).
+            RelaxationTest: the test, with E* = E/(1 - ν²).
 
         Raises:
             ValueError: a value out of its range (the message names it).
@@ -326,7 +326,7 @@ class CreepTest(_Scene):
                 for the ramp-and-hold, ``RampHold()``.
 
         Returns:
-            The :class:`lubjax.Load` drive, F̄ = ``load_bar`` × the history.
+            lubjax.Load: F̄ = ``load_bar`` × the history.
         """
         from ._drives import Load
         from ._indenter import RampHold
@@ -401,7 +401,7 @@ class Collision(_Scene):
         """The drive :func:`lubjax.relax` takes for this collision.
 
         Returns:
-            The :class:`lubjax.FreeSphere`: inverse mass G = 2β/(π St), starting velocity
+            lubjax.FreeSphere: inverse mass G = 2β/(π St), starting velocity
             v̄ = -1, load W̄ = W/F_s.
         """
         from ._drives import FreeSphere

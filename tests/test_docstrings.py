@@ -45,6 +45,7 @@ def sections(doc: str) -> dict[str, list]:
         warn_missing_types=False,
         warn_unknown_params=False,
         returns_named_value=False,
+        returns_multiple_items=False,
     )
     found: dict[str, list] = {}
     for section in parsed:
@@ -105,6 +106,18 @@ def _parameters(signature: inspect.Signature, documented: set[str]) -> list[str]
     return names
 
 
+def _is_type(text: str) -> bool:
+    """Whether a Returns section's text before its first colon reads as a type (``Result``,
+    ``tuple[float, float]``), not as prose ("The :class:", "A dict") the colon cuts short."""
+    if text != text.strip() or text.startswith("(") or " " in text.replace(", ", ","):
+        return False
+    try:
+        ast.parse(text, mode="eval")
+    except SyntaxError:
+        return False
+    return True
+
+
 def _entry_names(entries) -> list[str]:
     return [e.name.lstrip("*") for e in entries]
 
@@ -135,6 +148,10 @@ def function_problems(function, name: str, *, documented_elsewhere=()) -> list[s
     returns, yields, raised = body_facts(function)
     if returns and not found.get("returns"):
         problems.append(f"{name}: returns a value but has no Returns section")
+    for entry in found.get("returns", []):
+        if entry.annotation is not None and not _is_type(str(entry.annotation)):
+            problems.append(f"{name}: Returns starts with {str(entry.annotation)!r} and a colon, "
+                            "which the API page shows as the type: write 'Type: description'")
     if yields and not found.get("yields"):
         problems.append(f"{name}: yields but has no Yields section")
     listed = {str(e.annotation).split(".")[-1] for e in found.get("raises", [])}
@@ -172,6 +189,9 @@ def class_problems(cls, name: str) -> list[str]:
         for field in cls._fields:
             if field not in attributes:
                 problems.append(f"{name}: field {field!r} not under Attributes")
+        for entry in attributes:
+            if entry not in cls._fields and not hasattr(cls, entry):
+                problems.append(f"{name}: Attributes names {entry!r}, which is not a field")
     elif dataclasses.is_dataclass(cls):
         args = _entry_names(found.get("parameters", []))
         fields = [f.name for f in dataclasses.fields(cls) if f.init]
@@ -340,6 +360,18 @@ def _raise_unlisted(beta):
         raise ValueError("beta")
 
 
+def _prose_before_colon(beta):
+    """Do a thing.
+
+    Args:
+        beta: β.
+
+    Returns:
+        The :class:`Result`: F̄.
+    """
+    return beta
+
+
 def _numpy_style(beta):
     """Do a thing.
 
@@ -364,6 +396,14 @@ class _Fields(NamedTuple):
 
     a: float
     b: float
+
+
+class _FieldsLost(NamedTuple):
+    """Fields documented, but not declared.
+
+    Attributes:
+        a: the first.
+    """
 
 
 class _Plain:
@@ -398,6 +438,7 @@ def test_the_checker_passes_a_sound_docstring():
         (_no_returns, "returns a value but has no Returns section"),
         (_raise_unlisted, "raises ValueError but Raises does not list it"),
         (_numpy_style, "parameter 'beta' not under Args"),
+        (_prose_before_colon, "which the API page shows as the type"),
     ],
 )
 def test_the_checker_catches_a_broken_docstring(function, words):
@@ -407,6 +448,8 @@ def test_the_checker_catches_a_broken_docstring(function, words):
 
 def test_the_checker_catches_undocumented_fields_parameters_and_members():
     assert class_problems(_Fields, "fields") == ["fields: field 'b' not under Attributes"]
+    assert class_problems(_FieldsLost, "lost") == [
+        "lost: Attributes names 'a', which is not a field"]
     problems = class_problems(_Plain, "plain")
     assert "plain: parameter 'y' not under Args" in problems
     assert "plain.z: no docstring" in problems
