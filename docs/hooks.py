@@ -1,5 +1,5 @@
-"""mkdocs hooks: serve the figures the examples write, from where they are, and drop the Sphinx
-roles that docstrings put before their cross-references.
+"""mkdocs hooks: serve the figures the examples write, from where they are, drop the Sphinx
+roles that docstrings put before their cross-references, and make every figure a link to itself.
 
 The examples' PNGs live in ``examples/out/`` (their scripts write them there); the benchmarks'
 figures the pages show are kept in ``docs/figures/`` (benchmark outputs are not committed: a
@@ -29,5 +29,11 @@ def on_files(files, config):
     return files
 
 
+#: A figure alone in its paragraph, as Markdown's ``![alt](figures/x.png)`` renders it. Most
+#: figures are several panels wide, unreadable at the page's width: the link opens the full size.
+FIGURE = re.compile(r'<p>(<img alt="[^"]*" src="(?P<src>[^"]*figures/[^"]+\.png)" />)</p>')
+
+
 def on_page_content(html, page, config, files):
-    return SPHINX_ROLE.sub("", html)
+    html = SPHINX_ROLE.sub("", html)
+    return FIGURE.sub(r'<p><a href="\g<src>" title="full size">\1</a></p>', html)

@@ -5,8 +5,10 @@
 Fig 3: pressure at t̄ = 5 and force for β = 100, z̄0 = 0.5 under refinement of the tolerance
 (which sets the steps and the mesh), of the fine zone's spacing and of the domain, and on the
 paper's uniform L̄ = 4 mesh. Figs 4-6: pressure, film thickness and substrate
-displacement at several times for β = 100 and z̄0 = 0.5, 1, 2 (solid: loading, dashed: hold),
-with the short-time rigid-squeeze (eq 12b) and long-time Hertz (eq 14) asymptotes in Fig 4a.
+displacement at several times for β = 100 and z̄0 = 0.5, 1, 2 (solid: loading, dashed: hold;
+for z̄0 = 2, where the sphere stops short of the surface, the hold times resolve the pressure's
+decay on t_R = t_c/β), with the short-time rigid-squeeze (eq 12b) and long-time Hertz (eq 14)
+asymptotes in Fig 4a.
 """
 
 from __future__ import annotations
@@ -24,17 +26,30 @@ import numpy as np  # noqa: E402
 import lubjax  # noqa: E402
 
 TIMES = (0.2, 0.4, 0.6, 0.8, 1.0, 1.5, 2.0, 3.0, 5.0)
+#: Hold times of a sphere that stops short of the surface (z̄0 > 1), after the stop at t̄ = 1 in
+#: units of t_R = t_c/β: with no contact the film's pressure is gone within a few t_R (at β = 100
+#: it is 1e-8 of its peak by t̄ = 1.05), so the hold times of ``TIMES`` would all draw p̄ = 0.
+SHORT_HOLD = (0.1, 0.25, 0.5, 1.0)
+BETA = 100.0
+
+
+def profile_times(beta, z0):
+    """``TIMES``, or for z̄0 > 1 the loading times and hold times that resolve the decay."""
+    if z0 <= 1.0:
+        return TIMES
+    return tuple(t for t in TIMES if t <= 1.0) + tuple(1.0 + k / beta for k in SHORT_HOLD)
 
 
 def _profiles(beta, z0, settings=None):
-    return lubjax.relax(beta, z0, t_end=5.0, profile_times=TIMES, settings=settings)
+    return lubjax.relax(beta, z0, t_end=5.0, profile_times=profile_times(beta, z0),
+                        settings=settings)
 
 
 def figs_4_to_6(out, settings=None, dpi=110):
     results = {}
     for z0 in (0.5, 1.0, 2.0):
-        print(f"  β = 100, z̄0 = {z0}", file=sys.stderr)
-        results[z0] = _profiles(100.0, z0, settings)
+        print(f"  β = {BETA:g}, z̄0 = {z0}", file=sys.stderr)
+        results[z0] = _profiles(BETA, z0, settings)
     specs = [
         ("fig4_pressure.png", "pressure", "p̄"),
         ("fig5_film.png", "film", "h̄"),
@@ -44,10 +59,13 @@ def figs_4_to_6(out, settings=None, dpi=110):
         fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
         for ax, (z0, res) in zip(axes, results.items()):
             sel = res.r <= 2.0
-            colors = plt.cm.viridis(np.linspace(0, 0.9, len(TIMES)))
+            colors = plt.cm.viridis(np.linspace(0, 0.9, len(res.profile_times)))
             for c, t, prof in zip(colors, res.profile_times, getattr(res, field)):
                 ls = "-" if t <= 1.0 else "--"
-                ax.plot(res.r[sel], prof[sel], ls=ls, color=c, label=f"t̄ = {t:g}")
+                hold = (t - 1.0) * BETA
+                curve = (f"t̄ = {t:g}" if z0 <= 1.0 or t <= 1.0
+                         else f"t̄ = 1 + {hold:.2g} t_R")
+                ax.plot(res.r[sel], prof[sel], ls=ls, color=c, label=curve)
             if field == "pressure" and z0 == 0.5:
                 ax.plot(res.r[sel], lubjax.hertz_pressure(res.r[sel], z0), "ko", ms=3,
                         markevery=4, label="Hertz (eq 14)")
@@ -57,10 +75,14 @@ def figs_4_to_6(out, settings=None, dpi=110):
                             label="rigid squeeze (eq 12b)" if t == 0.2 else None)
             if field == "film":
                 ax.set_ylim(0, 2.2 if z0 < 2 else 3.2)
-            ax.set_title(f"β = 100, z̄0 = {z0:g}")
+            title = f"β = {BETA:g}, z̄0 = {z0:g}"
+            if z0 > 1.0:
+                title += " (no contact: the hold decays on t_R = t_c/β)"
+            ax.set_title(title, fontsize=10 if z0 > 1.0 else 12)
             ax.set_xlabel("r̄")
             ax.set_ylabel(label)
         axes[0].legend(fontsize=7, ncol=2)
+        axes[2].legend(fontsize=7, ncol=2)
         fig.tight_layout()
         fig.savefig(os.path.join(out, name), dpi=dpi)
         plt.close(fig)

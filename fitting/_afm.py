@@ -339,6 +339,14 @@ def read_afm(path, *, radius=None, poisson=None, segments=("approach",), baselin
         curves: indices of the curves to keep (default all).
         drive: "spring" (the cantilever; default) or "force" (load control of a
             constant-force dwell: segments approach and dwell).
+
+    Returns:
+        list[Trace]: one per curve kept (a force map gives one per curve).
+
+    Raises:
+        TraceError: afmformats not installed (``pip install lubjax[afm]``), a file it
+            cannot read, an unsupported imaging mode, no radius, a missing segment, a curve
+            index the file lacks, or a curve the checks of :func:`make_trace` refuse.
     """
     all_curves = load_curves(path)
     pick = range(len(all_curves)) if curves is None else curves

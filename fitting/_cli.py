@@ -103,6 +103,15 @@ def _epilog() -> str:
 
 
 def summary_line(res: FitResult) -> str:
+    """One line on a fit, as ``lubjax-fit`` prints it.
+
+    Args:
+        res: the :class:`FitResult`.
+
+    Returns:
+        The trace's name, the fitted values, β, z̄0, the rms residual, the reduced χ², whether
+        it converged and is identifiable, the iterations and the wall time.
+    """
     status = "converged" if res.converged else "NOT CONVERGED"
     if not res.identifiable:
         status += ", NOT IDENTIFIABLE"
@@ -121,9 +130,15 @@ def summary_line(res: FitResult) -> str:
 
 
 def plot_fit(res: FitResult, path: str) -> None:
-    """Data and model, residuals (with their autocorrelation), and the fit report.
+    """A figure of a fit: data and model, residuals (with their autocorrelation), and the fit
+    report.
 
-    Written atomically in the format of ``path``'s extension (png, pdf, svg, ...)."""
+    Written atomically in the format of ``path``'s extension (png, pdf, svg, ...).
+
+    Args:
+        res: the :class:`FitResult`.
+        path: the file to write.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -200,7 +215,13 @@ def plot_paths(plot: str, traces) -> list[str]:
 
 
 def write_table(results, path: str) -> None:
-    """One CSV row per trace: fitted values, errors, statistics and flags (written atomically)."""
+    """A CSV table of fits, one row per trace: fitted values, errors, statistics and flags
+    (written atomically).
+
+    Args:
+        results: the :class:`FitResult` of each trace.
+        path: the file to write.
+    """
     names = []
     for r in results:
         names += [n for n in r.spec.names if n not in names]

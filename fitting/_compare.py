@@ -113,7 +113,7 @@ def compare_models(traces, *, simple=None, rich=None, tau_start=1.0, **fit_kwarg
         **fit_kwargs: passed to :func:`fitting.fit_traces`.
 
     Returns:
-        (simple results, rich results, comparison dict): two lists of :class:`FitResult`, one
+        tuple: (simple results, rich results, comparison dict), two lists of :class:`FitResult`, one
         per trace, and the dict of the comparison (``likelihood_ratio``, ``p_value_nominal``,
         ``delta_aic``, ``delta_bic``, ``choice``, the text ``report``, ...); the dict is also
         in each result's ``stats["comparison"]``.

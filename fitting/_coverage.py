@@ -15,9 +15,23 @@ from ._model import FIT_SETTINGS
 
 
 def noise_draws(clean, n, rho=0.0, fraction=0.01, seed=2024):
-    """``n`` noisy copies of the trace ``clean``: stationary AR(1) noise on the force,
-    n_k = ρ n_{k-1} + √(1-ρ²) σ ε_k, marginal σ = ``fraction`` × the peak force (ρ = 0: white).
-    Seeded: the same arguments give the same draws."""
+    """Noisy copies of a clean trace: stationary AR(1) noise on the force,
+    n_k = ρ n_{k-1} + √(1-ρ²) σ ε_k with ε_k standard normal. Seeded: the same arguments give
+    the same draws.
+
+    Args:
+        clean: the noiseless :class:`Trace`.
+        n: the number of copies, ≥ 1.
+        rho: ρ, the lag-1 autocorrelation, in [0, 1) (default 0: white noise).
+        fraction: the marginal σ as a fraction of the peak force (default 0.01).
+        seed: the random generator's seed (default 2024).
+
+    Returns:
+        A list of ``n`` traces named "draw0", "draw1", ...
+
+    Raises:
+        ValueError: ``rho`` not in [0, 1) or ``n`` < 1.
+    """
     if not 0.0 <= rho < 1.0:
         raise ValueError(f"rho must lie in [0, 1), got {rho!r}")
     if n < 1:
@@ -36,11 +50,22 @@ def noise_draws(clean, n, rho=0.0, fraction=0.01, seed=2024):
 
 
 def coverage(draws, truth, settings=FIT_SETTINGS, **fit_kwargs):
-    """Fit ``draws`` (one batched :func:`fit_traces` call, ``fit_kwargs`` passed on) and return
-    per parameter of ``truth`` (name → true value) the rms z of the reported errors and of their
-    white-noise part alone, the mean bias and the scatter over the mean error, the solver part
-    over the mean error; with the number converged, the noise models chosen and the mean lag-1
-    autocorrelation of the residuals."""
+    """Whether the reported errors are honest: fit noise draws of a known truth and compare,
+    z = (estimate - truth)/reported error (honest errors: rms z near 1).
+
+    Args:
+        draws: the traces (:func:`noise_draws`), fitted in one batched :func:`fit_traces` call.
+        truth: parameter name → true value [SI].
+        settings: the model's ``lubjax.Settings`` (default ``FIT_SETTINGS``).
+        **fit_kwargs: passed on to :func:`fit_traces`.
+
+    Returns:
+        dict: ``table`` (per parameter of ``truth``: ``rms_z`` of the reported errors,
+        ``rms_z_white`` of their white-noise part alone, ``mean_bias_over_se``,
+        ``scatter_over_se`` and ``solver_over_se``, each over the mean reported error),
+        ``converged`` (how many), ``n``, ``noise_models`` (those chosen) and ``lag1`` (the mean
+        lag-1 autocorrelation of the residuals).
+    """
     results = fit_traces(draws, settings=settings, **fit_kwargs)
     table = {}
     for name, true in truth.items():

@@ -71,7 +71,13 @@ METHODS = ("lm", "trf", "lbfgs")
 
 
 class Start(NamedTuple):
-    """Starting values [SI] (keys: the spec's parameter names) and how they were found."""
+    """Starting values of a fit and how they were found (``start.E_star``, ``start.z0``, ...
+    read ``values``).
+
+    Attributes:
+        values: parameter name (the spec's) → starting value [SI].
+        notes: how each was found, in words.
+    """
 
     values: dict
     notes: tuple
@@ -84,19 +90,48 @@ class Start(NamedTuple):
 
 
 class FitResult(NamedTuple):
-    """One fitted trace. SI units throughout.
+    """One fitted trace (:func:`fit_traces`). SI units throughout.
 
-    ``values``/``stderr`` map the parameter names of ``spec.names`` (E_star, viscosity, z0, then
-    stiffening = E0/E∞ and relaxation_time τ [s] for a viscoelastic solid, offset) to the fitted
-    value and its reported 1-σ error; ``shared`` names those fitted jointly with the other traces
-    of ``group``. ``stats`` holds the fit statistics and the parts of the error budget
-    (:func:`fitting._stats.summarise`)."""
+    The parameter names, ``spec.names``, are E_star (E* [Pa]), viscosity (η [Pa s]), z0 (the
+    initial gap [m]), then stiffening (E0/E∞) and relaxation_time (τ [s]) for a viscoelastic
+    solid, and offset (of the response channel [N or m]).
+
+    Attributes:
+        name: the trace's name (its file, or a label).
+        spec: the fitted :class:`ModelSpec`.
+        values: parameter name → fitted value [SI].
+        stderr: parameter name → its reported 1-σ error [SI] (white noise, correlated noise
+            and the solver's error, ``stats["error_parts"]``); 0 for a parameter held fixed.
+        correlation: the parameters' correlation matrix over ``spec.names``; NaN rows and
+            columns for parameters held fixed.
+        shared: the parameters fitted jointly with the other traces of ``group`` (empty for a
+            separate fit).
+        group: the names of the traces of a joint fit (empty for a separate fit).
+        scales: the :class:`Scales` read off the trace.
+        stats: fit statistics (chi2, reduced_chi2, noise_model, autocorrelation_lag1,
+            rms_residual, condition, max_correlation, error_parts, ...;
+            ``fitting._stats.summarise``).
+        converged: whether the optimiser converged (the first flag says how).
+        identifiable: whether the parameters are identifiable: max |correlation| and the
+            condition number within ``fitting._stats``' limits.
+        n_iterations: optimiser iterations.
+        n_model_runs: model runs (each with its Jacobian).
+        method: the optimiser: "lm", "trf" or "lbfgs".
+        wall_s: wall time of the fit [s].
+        start: the :class:`Start` the fit began from.
+        flags: warnings in words: convergence, identifiability, the noise, implausible values.
+        time: sample times [s].
+        data: the measured response at the samples [N, or m under load control].
+        model: the fitted response at the samples [N or m].
+        metadata: the trace's ``# key: value`` metadata.
+        fixed: the parameters held at given values (``fixed=``), stderr 0.
+    """
 
     name: str
     spec: ModelSpec
     values: dict
     stderr: dict
-    correlation: np.ndarray  # over spec.names; NaN rows/columns for parameters held fixed
+    correlation: np.ndarray
     shared: tuple
     group: tuple
     scales: Scales
@@ -109,19 +144,46 @@ class FitResult(NamedTuple):
     wall_s: float
     start: Start
     flags: tuple
-    time: np.ndarray  # sample times [s]
-    data: np.ndarray  # measured response [N or m]
-    model: np.ndarray  # fitted response at the samples
+    time: np.ndarray
+    data: np.ndarray
+    model: np.ndarray
     metadata: dict
-    fixed: tuple = ()  # the parameters held at given values (``fixed=``): stderr 0
+    fixed: tuple = ()
 
-    E_star = property(lambda self: self.values["E_star"])
-    viscosity = property(lambda self: self.values["viscosity"])
-    z0 = property(lambda self: self.values["z0"])
-    offset = property(lambda self: self.values["offset"])
-    beta = property(lambda self: self.scales.beta(self.E_star, self.viscosity))
-    z0_over_dc = property(lambda self: self.z0 / self.scales.indent)
-    rms_residual = property(lambda self: self.stats["rms_residual"])
+    @property
+    def E_star(self) -> float:
+        """E*, the fitted plane-strain modulus [Pa] (the relaxed one, E*∞, when viscoelastic)."""
+        return self.values["E_star"]
+
+    @property
+    def viscosity(self) -> float:
+        """η, the fitted film viscosity [Pa s]."""
+        return self.values["viscosity"]
+
+    @property
+    def z0(self) -> float:
+        """z0, the fitted initial gap [m]."""
+        return self.values["z0"]
+
+    @property
+    def offset(self) -> float:
+        """The fitted offset of the response channel [N or m]."""
+        return self.values["offset"]
+
+    @property
+    def beta(self) -> float:
+        """β of the fitted values (eq 8e, with the trace's d_c and t_c), dimensionless."""
+        return self.scales.beta(self.E_star, self.viscosity)
+
+    @property
+    def z0_over_dc(self) -> float:
+        """z̄0 = z0/d_c of the fitted values (eq 8e), dimensionless."""
+        return self.z0 / self.scales.indent
+
+    @property
+    def rms_residual(self) -> float:
+        """The rms of data - model [N or m]."""
+        return self.stats["rms_residual"]
 
 
 # --------------------------------------------------------------------------- starting values
@@ -230,10 +292,24 @@ def _creep_guess(t, load, d, scales: Scales, notes: list) -> dict:
 
 
 def initial_guess(trace: Trace, scales: Scales, spec: ModelSpec | None = None) -> Start:
-    """Starting values from the physics, not from the user (see ``_travel_guess`` and
-    ``_creep_guess``). For a sphere on a spring the sphere's own travel, stage travel less F/k,
-    goes into the relaxation-test rules. A viscoelastic solid starts at E0/E∞ = 1.2 and τ = t_c
-    (:func:`compare_models` starts it from the elastic fit instead, at three τ)."""
+    """Starting values from the physics, not from the user.
+
+    Relaxation test: z0 and η from Reynolds' squeeze film on the loading, F = 6πηR² v/(z0 - d)
+    (eq 12b), E* from Hertz at the end of the hold (eq 16) or from the relaxation time
+    t_R = t_c/β; creep: z0 and η from the Reynolds drainage, E* from Hertz's indentation. For a
+    sphere on a spring the sphere's own travel, stage travel less F/k, goes into the
+    relaxation-test rules. A viscoelastic solid starts at E0/E∞ = 1.2 and τ = t_c
+    (:func:`compare_models` starts it from the elastic fit instead, at three τ).
+
+    Args:
+        trace: the :class:`Trace`.
+        scales: its :class:`Scales` (:func:`scales_from_trace`).
+        spec: the :class:`ModelSpec`; None (default): the drive the trace's metadata names.
+
+    Returns:
+        Start: a value per parameter of ``spec.names`` [SI] and notes on how
+        each was found.
+    """
     spec = ModelSpec(drive=_model.drive_of(trace)) if spec is None else spec
     notes: list[str] = []
     if spec.drive == "force":
@@ -733,7 +809,7 @@ def fit_traces(
             except a shared one.
 
     Returns:
-        One :class:`FitResult` per trace, in the order of ``traces``: the values and 1-σ
+        list[FitResult]: one per trace, in the order of ``traces``, with the values and 1-σ
         errors in SI units (E* [Pa], η [Pa s], z0 [m], ...), the statistics, the flags and the
         model at the samples.
 
@@ -811,7 +887,18 @@ def fit_traces(
 
 
 def fit_trace(trace: Trace, **kwargs) -> FitResult:
-    """Fit one trace; keyword arguments as :func:`fit_traces`."""
+    """Fit one trace.
+
+    Args:
+        trace: the :class:`Trace`.
+        **kwargs: as :func:`fit_traces`.
+
+    Returns:
+        FitResult: the fit.
+
+    Raises:
+        ValueError: as :func:`fit_traces`.
+    """
     return fit_traces([trace], **kwargs)[0]
 
 

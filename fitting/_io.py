@@ -86,7 +86,16 @@ class Trace(NamedTuple):
     name: str = ""
 
     def meta_float(self, key: str, default=None):
-        """A metadata value as a float (``default`` if absent or not a number)."""
+        """A metadata value as a float.
+
+        Args:
+            key: the metadata key (``radius_m``, ``speed_m_s``, ...).
+            default: what to return when the key is absent or its value is not a number
+                (default None).
+
+        Returns:
+            The value as a float, or ``default``.
+        """
         try:
             return float(self.metadata[key])
         except (KeyError, TypeError, ValueError):
@@ -222,7 +231,24 @@ def check_force_sign(trace: Trace, drive: str = "travel") -> None:
 
 
 def make_trace(time, displacement, force, radius, metadata=None, name: str = "") -> Trace:
-    """Build a validated :class:`Trace` from arrays (same checks as the file reader)."""
+    """A validated :class:`Trace` from arrays (the file reader's checks).
+
+    Args:
+        time: sample times t_k [s], 1-D, finite, strictly increasing, at least ``MIN_ROWS``.
+        displacement: the indenter's travel d(t_k) toward the substrate [m], as many.
+        force: the normal force F(t_k) [N], positive in compression, as many.
+        radius: R, the sphere (or reduced) radius [m], > 0.
+        metadata: ``# key: value`` metadata (values as strings or numbers); None: none.
+        name: where the trace came from (a label; default "").
+
+    Returns:
+        Trace: the trace (``radius_m`` added to its metadata).
+
+    Raises:
+        TraceError: a column not numeric, not 1-D, not finite, of another length or with a
+            time that does not increase (the message names row and column), too few rows, a
+            radius not > 0, a Poisson's ratio out of range, or implausible scales.
+    """
     label = name or "trace"
     arrays = []
     for col, values in zip(COLUMNS, (time, displacement, force), strict=True):
@@ -706,16 +732,27 @@ def _options(columns, units, force_sign) -> dict:
 
 def parse_trace(text: str, name: str = "<string>", *, columns=None, units=None,
                 force_sign: int = 1) -> Trace:
-    """Parse the text of a trace (see module docstring). Errors name ``name:line:column``.
+    """Parse the text of a trace (the format: :mod:`fitting._io`'s module docstring).
 
     Args:
+        text: the file's text: ``# key: value`` metadata lines, a header and rows.
+        name: where the text came from, named in errors as ``name:line:column`` (default
+            "<string>").
         columns: None (the header names the columns: time_s, displacement_m, force_N), or which
             cells hold them, ``"time=Time (s),displacement=2,force=Load (uN)"`` or a dict (header
             names, or cell numbers from 1 in the string, from 0 in a dict): other cells are
             ignored, and a unit in brackets in the header cell is the column's unit.
         units: units of the columns, ``"force=mN,time=ms"`` or a dict (over a ``# units:`` line
             and the header's); converted to SI on reading.
-        force_sign: -1 flips the force (an instrument that records compression as negative).
+        force_sign: 1 (default) or -1, which flips the force (an instrument that records
+            compression as negative).
+
+    Returns:
+        Trace: the trace, in SI units (s, m, N).
+
+    Raises:
+        TraceError: malformed text (the message names ``name:line:column``), a ``columns``,
+            ``units`` or ``force_sign`` it cannot use, or the checks of :func:`make_trace`.
     """
     opts = _options(columns, units, force_sign)
     if text.startswith("\ufeff"):
@@ -830,7 +867,7 @@ def read_trace(path, *, columns=None, units=None, force_sign: int = 1) -> Trace:
         force_sign: -1 flips the force, as :func:`parse_trace`.
 
     Returns:
-        The :class:`Trace`, in SI units (s, m, N).
+        Trace: the trace, in SI units (s, m, N).
 
     Raises:
         TraceError: a folder, a file over ``MAX_FILE_BYTES``, a file that cannot be read, or
@@ -866,7 +903,19 @@ def read_trace(path, *, columns=None, units=None, force_sign: int = 1) -> Trace:
 
 
 def format_trace(trace: Trace) -> str:
-    """The CSV text of a trace: metadata lines, header, rows (round-trips through parse_trace)."""
+    """The CSV text of a trace: metadata lines, header, rows (round-trips through
+    :func:`parse_trace`).
+
+    Args:
+        trace: the :class:`Trace`.
+
+    Returns:
+        str: ``# key: value`` lines, the header ``time_s,displacement_m,force_N`` and one
+        row per sample.
+
+    Raises:
+        TraceError: a metadata key or value that cannot be written on one line.
+    """
     lines = []
     meta = dict(trace.metadata)
     meta.setdefault("radius_m", repr(float(trace.radius)))
@@ -881,5 +930,14 @@ def format_trace(trace: Trace) -> str:
 
 
 def write_trace(path, trace: Trace) -> None:
-    """Write a trace as CSV, atomically (creates parent folders)."""
+    """Write a trace as CSV (:func:`format_trace`), atomically, creating parent folders.
+
+    Args:
+        path: the file to write.
+        trace: the :class:`Trace`.
+
+    Raises:
+        TraceError: as :func:`format_trace`.
+        OSError: the file cannot be written.
+    """
     write_text(path, format_trace(trace))

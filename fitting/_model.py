@@ -69,20 +69,15 @@ from ._io import Trace, check_force_sign
 
 DRIVES = ("travel", "spring", "force")
 
-#: Accuracy of the model inside fits: the solver's own error control at rtol = 3e-4 (132
-#: nodes; the solver's default 1e-4 has 177). At 1e-3 the model of paper_dc140 at the true
-#: parameters was 4e-3 of the peak off where the lagged stage stops (a kink in the travel the
-#: steps must resolve), rms 2.7e-4; at 3e-4 2.0e-3 and 1.5e-4 (tests/test_fitting.py; 1.9e-3
-#: and 1.2e-4 with the plain-hat far field and 198 nodes). The
-#: model's remaining error at the optimum is estimated and folded into the reported errors
-#: (fitting._stats). The force is held to rtol relative to itself only down to 1e-5 of its peak
-#: (a load cell's noise is ≥ 1e-3 of it), else the decaying hold of z̄0 > 1 traces chases the
-#: quantisation of the recorded travel through 10⁴ steps. The attempt budget is 5000 (a
-#: bundled trace takes ≈ 300): the step record is max_steps long, and a batch of fits carries
-#: one per trace and tangent. A fit reads only the force, so the film's error inside a contact
-#: is held through the force it moves (``film_error="force"``): a near-dry contact (an AFM
-#: probe on a gel, β up to 10⁹) costs 2-6× fewer steps than with every film held to itself.
 FIT_SETTINGS = lubjax.Settings(rtol=3e-4, force_floor=1e-5, max_steps=5000, film_error="force")
+"""The accuracy of the model inside fits: ``lubjax.Settings(rtol=3e-4, force_floor=1e-5,
+max_steps=5000, film_error="force")``. rtol = 3e-4 keeps the model's error at the true
+parameters of the bundled traces to 2e-3 of the peak (rms 1.5e-4); the force is held to rtol
+only down to 1e-5 of its peak (a load cell's noise is ≥ 1e-3 of it); a bundled trace takes
+about 300 of the 5000 attempts. A fit reads only the force, so the film's error inside a
+contact is held through the force it moves: a near-dry contact (an AFM probe on a gel, β up
+to 10⁹) costs 2-6× fewer steps than with every film held to itself. The model's remaining
+error at the optimum is estimated and folded into the reported errors."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,10 +87,15 @@ class ModelSpec:
     Args:
         drive: "travel" (prescribed travel, the default), "spring" (travel through a load cell
             of stiffness ``# stiffness_N_m:``) or "force" (load control).
-        layer: None (half-space) or (H [m], ν, "bonded" | "frictionless"): a layer of known
-            thickness on a rigid base.
-        viscoelastic: fit a standard linear solid (E0/E∞, τ) instead of an elastic solid.
-        fit_offset: fit a constant offset of the response channel.
+        layer: None (half-space, the default) or (H [m] > 0, ν in (-1, 0.5], "bonded" |
+            "frictionless"): a layer of known thickness on a rigid base.
+        viscoelastic: fit a standard linear solid (E0/E∞, τ) instead of an elastic solid
+            (default False).
+        fit_offset: fit a constant offset of the response channel (default True).
+
+    Raises:
+        ValueError: an unknown ``drive``, or a ``layer`` not (thickness, Poisson's ratio,
+            base) in range.
     """
 
     drive: str = "travel"
@@ -136,6 +136,11 @@ class ModelSpec:
         return np.array([n != "offset" or self.fit_offset for n in self.names])
 
     def substrate_label(self) -> str:
+        """The substrate in words, for reports.
+
+        Returns:
+            E.g. "elastic half-space" or "viscoelastic (standard linear solid) layer H = ...".
+        """
         geometry = "half-space" if self.layer is None else (
             f"layer H = {self.layer[0]:.4g} m (nu = {self.layer[1]:g}, {self.layer[2]} base)"
         )
@@ -164,24 +169,50 @@ def to_theta(name: str, value: float, data_unit: float = 1.0) -> float:
 
 
 class Scales(NamedTuple):
-    """Nominal scales read off a trace (SI)."""
+    """Nominal scales read off a trace (SI; :func:`scales_from_trace`).
 
-    indent: float  # d_c [m]
-    speed: float  # d_c/t_c [m/s] (the ramp speed for a prescribed travel)
-    radius: float  # R [m]
-    t_on: float  # motion start [s]; t̄ = (t - t_on)/t_c
-    time_scale: float  # t_c [s]
-    t_end_motion: float  # end of the input's ramp, t̄ units
-    response_unit: float  # y_u: the peak of |response| [N or m]
-    input_end: float  # u_end: final travel [m] or final load [N]
+    Attributes:
+        indent: d_c [m], the final travel (or, under load control, the final approach).
+        speed: d_c/t_c [m/s] (the ramp speed for a prescribed travel).
+        radius: R, the sphere's radius [m].
+        t_on: the motion's start [s]; t̄ = (t - t_on)/t_c.
+        time_scale: t_c [s], the final input over the ramp's rate.
+        t_end_motion: the end of the input's ramp, in t̄ (units of t_c).
+        response_unit: y_u, the peak of |response| [N or m].
+        input_end: u_end, the final travel [m] or final load [N].
+    """
+
+    indent: float
+    speed: float
+    radius: float
+    t_on: float
+    time_scale: float
+    t_end_motion: float
+    response_unit: float
+    input_end: float
 
     def beta(self, E_star, viscosity):
-        """β = E* d_c^{3/2} t_c/(6π η R^{3/2}) (eq 8e with v0 = d_c/t_c: ``lubjax.si_scales``)."""
+        """β of a modulus and viscosity on these scales (eq 8e with v0 = d_c/t_c).
+
+        Args:
+            E_star: E*, plane-strain modulus [Pa].
+            viscosity: η, film viscosity [Pa s].
+
+        Returns:
+            β = E* d_c^{3/2} t_c/(6π η R^{3/2}), dimensionless (``lubjax.si_scales``).
+        """
         return lubjax.si_scales(E_star, self.radius, self.indent, speed=self.speed,
                                 viscosity=viscosity)["beta"]
 
     def force_scale(self, E_star):
-        """F/F̄ = 2 E* d_c^{3/2} √R/π (eq 11b: ``lubjax.si_scales``)."""
+        """The force scale of a modulus on these scales (eq 11b).
+
+        Args:
+            E_star: E*, plane-strain modulus [Pa].
+
+        Returns:
+            F_s = F/F̄ = 2 E* d_c^{3/2} √R/π [N] (``lubjax.si_scales``).
+        """
         return lubjax.si_scales(E_star, self.radius, self.indent, speed=self.speed)["force_N"]
 
 
@@ -210,9 +241,22 @@ def _channels(trace: Trace, drive: str):
 
 
 def scales_from_trace(trace: Trace, drive: str | None = None) -> Scales:
-    """d_c, t_c, t_on and the ramp (see module docstring). ValueError if the input does not
-    ramp up and settle into a hold, or the force is negative in compression
-    (:func:`fitting._io.check_force_sign`)."""
+    """The scales of a trace, read off its input channel (``fitting._model``'s module
+    docstring): u_end, the onset t_on, t_c = u_end/rate, the ramp's end, d_c.
+
+    Args:
+        trace: the :class:`Trace`.
+        drive: "travel", "spring" or "force"; None (default): the trace's ``# drive:``
+            metadata, else "travel".
+
+    Returns:
+        Scales: the trace's scales.
+
+    Raises:
+        ValueError: the input does not ramp up (and, under load control, settle into a hold),
+            the response is never positive, the final approach under a load is not positive,
+            or the force is negative in compression (the message names the column).
+    """
     drive = drive_of(trace, drive)
     check_force_sign(trace, drive)
     t = trace.time
@@ -262,33 +306,65 @@ def scales_from_trace(trace: Trace, drive: str | None = None) -> Scales:
 
 
 def noise_level(values: np.ndarray) -> float:
-    """Robust noise σ of a sampled channel from successive differences: 1.4826·MAD(Δy)/√2
-    (the smooth signal changes little between samples; white noise adds variance 2σ² to Δy)."""
+    """The noise of a sampled channel, robustly, from successive differences.
+
+    The smooth signal changes little between samples; white noise adds variance 2σ² to Δy.
+
+    Args:
+        values: the samples y_k (1-D, in any unit).
+
+    Returns:
+        σ = 1.4826·MAD(Δy)/√2, in the unit of ``values``.
+    """
     dy = np.diff(values)
     return float(1.4826 * np.median(np.abs(dy - np.median(dy))) / math.sqrt(2.0))
 
 
 class TraceData(NamedTuple):
-    """The arrays one trace contributes to the model (a pytree; stack them to ``vmap``)."""
+    """The arrays one trace contributes to the model (a pytree; stack them to ``vmap``;
+    :func:`trace_data`).
 
-    history: lubjax.SampledTravel  # measured input u(t̄)/u_end, padded to a common sample count
-    t_end: jax.Array  # t̄ of the last sample
-    t_data: jax.Array  # t̄ of the samples
-    response: jax.Array  # measured response [N or m]
-    weight: jax.Array  # 1 for samples, 0 for padding
-    log_beta_unit: jax.Array  # ln[d_c^{3/2} t_c/(6π R^{3/2})]: ln β = ln E* - ln η + this
-    indent: jax.Array  # d_c
-    time_scale: jax.Array  # t_c
-    force_scale_unit: jax.Array  # 2 d_c^{3/2} √R/π: F = E* · this · F̄
-    response_unit: jax.Array  # y_u: the offset's unit
-    noise: jax.Array  # σ: the residuals' unit
-    drive_unit: jax.Array  # load F_end/force_scale_unit, or π k/(2√(R d_c)); ÷ E* gives the drive's
-    disc: lubjax.stepper.Discretisation | None  # a layer's own influence matrix (None: solver's)
+    Attributes:
+        history: the measured input u(t̄)/u_end (a ``lubjax.SampledTravel``), padded to a
+            common sample count.
+        t_end: t̄ of the last sample (units of t_c).
+        t_data: t̄ of the samples.
+        response: the measured response [N or m].
+        weight: w_k, 1 for samples, 0 for padding.
+        log_beta_unit: ln[d_c^{3/2} t_c/(6π R^{3/2})]: ln β = ln E* - ln η + this (eq 8e).
+        indent: d_c [m].
+        time_scale: t_c [s].
+        force_scale_unit: 2 d_c^{3/2} √R/π [m²]: F = E* · this · F̄ (eq 11b).
+        response_unit: y_u, the offset's unit [N or m].
+        noise: σ, the residuals' unit [N or m].
+        drive_unit: the load F_end/``force_scale_unit`` or the spring's π k/(2√(R d_c)) [Pa];
+            ÷ E* gives the drive's dimensionless number.
+        disc: a layer's own discretisation (its influence matrix), or None: the solver's.
+    """
+
+    history: lubjax.SampledTravel
+    t_end: jax.Array
+    t_data: jax.Array
+    response: jax.Array
+    weight: jax.Array
+    log_beta_unit: jax.Array
+    indent: jax.Array
+    time_scale: jax.Array
+    force_scale_unit: jax.Array
+    response_unit: jax.Array
+    noise: jax.Array
+    drive_unit: jax.Array
+    disc: lubjax.stepper.Discretisation | None
 
 
 class Solver(NamedTuple):
     """What every trace of a batch shares: the mesh arrays and the tolerance (its numbers are
-    leaves, its order and step budget static)."""
+    leaves, its order and step budget static; :func:`make_solver`).
+
+    Attributes:
+        disc: the :class:`lubjax.stepper.Discretisation` of the settings' mesh.
+        tol: the :class:`lubjax.stepper.Tolerance`.
+    """
 
     disc: lubjax.stepper.Discretisation
     tol: lubjax.stepper.Tolerance
@@ -311,7 +387,14 @@ def history(trace: Trace, scales: Scales, drive: str) -> lubjax.SampledTravel:
 
 
 def make_solver(settings=None) -> Solver:
-    """Mesh arrays (cached per mesh) and tolerance of ``settings`` (default ``FIT_SETTINGS``)."""
+    """The mesh arrays (cached per mesh) and the tolerance of some settings.
+
+    Args:
+        settings: a ``lubjax.Settings``; None (default): ``FIT_SETTINGS``.
+
+    Returns:
+        Solver: the shared mesh arrays and tolerance.
+    """
     settings = FIT_SETTINGS if settings is None else settings
     return Solver(lubjax.stepper.discretise(settings.mesh()), settings.tolerance())
 
@@ -338,9 +421,21 @@ def trace_data(
     n_pad: int | None = None,
     n_history: int | None = None,
 ) -> TraceData:
-    """Arrays for one trace; pad the samples to ``n_pad`` with zero weight and the history to
-    ``n_history`` samples (so traces of different lengths stack). ``mesh``: the solver's (default
-    ``FIT_SETTINGS.mesh()``), needed for a layer's influence matrix."""
+    """The arrays one trace contributes to the model.
+
+    Args:
+        trace: the :class:`Trace`.
+        scales: its :class:`Scales`.
+        spec: the :class:`ModelSpec`.
+        mesh: the solver's ``lubjax.Mesh``, needed for a layer's influence matrix; None
+            (default): ``FIT_SETTINGS.mesh()``.
+        n_pad: pad the samples to this count with zero weight (≥ the trace's), so traces of
+            different lengths stack; None (default): no padding.
+        n_history: pad the input history to this many samples likewise; None: no padding.
+
+    Returns:
+        TraceData: the trace's arrays.
+    """
     n = trace.time.size
     n_pad = n if n_pad is None else n_pad
     pad = n_pad - n
@@ -458,9 +553,22 @@ def _response(theta, channel, data: TraceData, spec: ModelSpec):
 
 
 def predict(theta, data: TraceData, solver: Solver, spec: ModelSpec, mode: str = "forward"):
-    """Model response at the samples [N or m], and the thinnest film min h̄ over the run (must
-    stay > 0; -inf when the run did not reach its last sample). ``mode``: the rollout's
-    (``"forward"``: while_loop, jvp; ``"reverse"``: checkpointed scan, also ``jax.grad``)."""
+    """The model's response at the samples: y_k = F_s F̄(t̄_k) + b for a force response (eq 11b),
+    y_k = d_c (z̄0 - z̄(t̄_k)) + b for a displacement response (``fitting._model``).
+
+    Args:
+        theta: θ = (ln E*, ln η, ln z0, [ln(E0/E∞ - 1), ln τ], b/y_u), a 1-D array (SI inside
+            the logarithms).
+        data: the trace's :class:`TraceData`.
+        solver: the :class:`Solver`.
+        spec: the :class:`ModelSpec`.
+        mode: the rollout's: "forward" (default; ``while_loop``, jvp) or "reverse"
+            (checkpointed scan, also ``jax.grad``).
+
+    Returns:
+        (y, h̄_min): the response at the samples [N or m], and the thinnest film over the run
+        (units of d_c; must stay > 0; -inf when the run did not reach its last sample).
+    """
     channel, film = _stepper_output(solver_inputs(theta, data, spec), data, solver, spec, mode)
     return _response(theta, channel, data, spec), film
 
@@ -471,18 +579,40 @@ def _scaled(y, data: TraceData):
 
 
 def residuals(theta, data: TraceData, solver: Solver, spec: ModelSpec):
-    """r_k = w_k (y_k(θ) - y_k^data)/σ, and min h̄ as aux."""
+    """The residuals r_k = w_k (y_k(θ) - y_k^data)/σ (misfit in units of the trace's noise).
+
+    Args:
+        theta: θ, as :func:`predict`.
+        data: the trace's :class:`TraceData`.
+        solver: the :class:`Solver`.
+        spec: the :class:`ModelSpec`.
+
+    Returns:
+        (r, h̄_min): the residuals (dimensionless, one per padded sample) and the thinnest
+        film, as :func:`predict`.
+    """
     y, film_min = predict(theta, data, solver, spec)
     return _scaled(y, data), film_min
 
 
 def residuals_and_jacobian(theta, data: TraceData, solver: Solver, spec: ModelSpec):
-    """(r, J = ∂r/∂θ, min h̄) by forward mode.
+    """The residuals and their Jacobian, by forward mode.
 
-    By the chain rule through u = u(θ) (:func:`solver_inputs`): one jvp of the stepper per
+    By the chain rule through u = u(θ) (``solver_inputs``): one jvp of the stepper per
     component of u (vmap-ed; 2 for a prescribed travel on an elastic solid, where θ has 4),
     ∂c/∂θ = ∂c/∂u · ∂u/∂θ for the stepper's channel c, then the cheap response map's jvp in θ
-    and c together."""
+    and c together.
+
+    Args:
+        theta: θ, as :func:`predict`.
+        data: the trace's :class:`TraceData`.
+        solver: the :class:`Solver`.
+        spec: the :class:`ModelSpec`.
+
+    Returns:
+        (r, J, h̄_min): the residuals, J = ∂r/∂θ (shape (samples, len(θ))) and the thinnest
+        film, as :func:`residuals`.
+    """
     u = solver_inputs(theta, data, spec)
     du = jax.jacfwd(solver_inputs)(theta, data, spec)  # (m, p), exact and cheap
 

@@ -75,8 +75,14 @@ def _finite(x):
 def result_to_dict(res: FitResult) -> dict:
     """A JSON-ready summary of a fit (SI units; keys as documented in data/README.md).
 
-    ``plausible`` is False when E*, η or the ramp speed lies outside soft lubricated contact
-    (:mod:`fitting._checks`); the flags then name the likely unit mistake."""
+    Args:
+        res: the :class:`FitResult`.
+
+    Returns:
+        A dict of plain numbers, strings, lists and dicts. Its ``plausible`` is False when E*,
+        η or the ramp speed lies outside soft lubricated contact (``fitting._checks``); the
+        flags then name the likely unit mistake.
+    """
     names = res.spec.names
     resp_unit = "N" if res.spec.response == "force" else "m"
     out = {"trace": res.name}
@@ -158,7 +164,16 @@ def _value_line(res, n):
 
 
 def fit_report(res: FitResult, min_correl: float = 0.1) -> str:
-    """A text report: fit statistics, variables with errors and starts, correlations, flags."""
+    """A text report of a fit: statistics, variables with errors and starts, correlations,
+    flags.
+
+    Args:
+        res: the :class:`FitResult`.
+        min_correl: correlations of at most this |value| are left out (default 0.1).
+
+    Returns:
+        The report, several lines.
+    """
     st = res.stats
     names = [n for n in res.spec.names if res.stderr.get(n, 0) > 0 or n != "offset"]
     lines = [

@@ -18,16 +18,19 @@ import numbers
 import jax
 import numpy as np
 
-#: Parameter ranges the solver accepts. Inside them the stepper was mapped (README, stability
-#: map: β ∈ [0.1, 10⁶] × z̄0 ∈ [0.05, 5] to t̄ = 10⁶); outside, the thin-film scales overflow
-#: float64 long before any physics changes.
 BETA_RANGE = (1e-4, 1e9)
+"""(lowest, highest) β (eq 8e) the solver accepts, both included. Inside the ranges the stepper
+was mapped (README, stability map: β ∈ [0.1, 10⁶] × z̄0 ∈ [0.05, 5] to t̄ = 10⁶); outside them
+the thin-film scales overflow float64 long before any physics changes."""
 Z0_RANGE = (1e-4, 1e3)
+"""(lowest, highest) z̄0 = z0/d_c (eq 8e) the solver accepts, both included (see
+``BETA_RANGE``)."""
 T_END_MAX = 1e9
-#: Poisson's ratio ν ∈ (-1, 0.5] (0.5: incompressible): open below, closed above.
+"""The longest run, in t̄ (units of t_c)."""
 POISSON_RANGE = (-1.0, 0.5)
-#: How a layer rests on its rigid base: no slip, or free to slide.
+"""Poisson's ratio ν ∈ (-1, 0.5] (0.5: incompressible): open below, closed above."""
 LAYER_BASES = ("bonded", "frictionless")
+"""How a layer rests on its rigid base: no slip ("bonded"), or free to slide ("frictionless")."""
 
 
 def is_traced(value) -> bool:
@@ -199,7 +202,15 @@ def check_in_range(name, value, bounds):
 
 
 def check_parameters(beta, z0):
-    """ValueError naming the parameter unless β and z̄0 lie in the solver's ranges."""
+    """Check that β and z̄0 lie in the solver's ranges.
+
+    Args:
+        beta: β (eq 8e), dimensionless, in ``BETA_RANGE``; a JAX tracer passes unchecked.
+        z0: z̄0 = z0/d_c (eq 8e), dimensionless, in ``Z0_RANGE``; a tracer passes unchecked.
+
+    Raises:
+        ValueError: β or z̄0 not a finite scalar in its range (the message names it).
+    """
     check_in_range("beta", beta, BETA_RANGE)
     check_in_range("z0", z0, Z0_RANGE)
 

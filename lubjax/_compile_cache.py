@@ -25,10 +25,17 @@ def cache_dir() -> str:
 
 
 def enable_compilation_cache(path: str | None = None) -> str | None:
-    """Point JAX's persistent compilation cache at ``path`` (default :func:`cache_dir`); every
-    compilation is cached (the solver's take seconds). Returns the folder, or None when
-    ``LUBJAX_CACHE=0`` or the folder cannot be made (then nothing changes: a cache is an
-    optimisation, never a reason to fail)."""
+    """Point JAX's persistent compilation cache at a folder; every compilation is cached (the
+    solver's take seconds).
+
+    Args:
+        path: the folder; None (default): ``$LUBJAX_CACHE_DIR``, else
+            ``$XDG_CACHE_HOME/lubjax/jax`` or ``~/.cache/lubjax/jax``.
+
+    Returns:
+        The folder, or None when ``LUBJAX_CACHE=0`` or the folder cannot be made or written
+        (then nothing changes: a cache is an optimisation, never a reason to fail).
+    """
     if os.environ.get("LUBJAX_CACHE", "1").strip().lower() in ("0", "off", "no", "false"):
         return None
     path = cache_dir() if path is None else path

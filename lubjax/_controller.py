@@ -63,15 +63,23 @@ class Tolerance:
     compiled program serves every tolerance; ``order`` and ``max_steps`` shape the program and
     are static. Closed over (as ``sweep`` and the fits do), it is a constant of the program.
 
-    rtol, atol: the step's estimated local error e (film h̄ at every node, and F̄) must satisfy
-        |e| ≤ atol + rtol·|value|; a free gap z̄, |e| ≤ atol + rtol·max|z̄ - z̄_start|.
-    initial_step: the first step after t̄_start and after each velocity jump, divided by
-        max(1, β).
-    order: 2 (BDF2), 1 (backward Euler throughout) or 3 (BDF3 from a segment's fourth step).
-    max_steps: the attempt budget (accepted + rejected).
-    force_floor: F̄ is held to rtol relative to max(|F̄|, force_floor × its peak so far).
-    film_error: "relative" or "force", what the film's error is measured against
-        (:func:`film_scale`).
+    :class:`lubjax.Settings` checks these numbers and documents them in full;
+    ``Settings.tolerance()`` builds one.
+
+    Attributes:
+        rtol: relative local error tolerance, dimensionless: the step's estimated local error
+            e (film h̄ at every node, and F̄) must satisfy |e| ≤ atol + rtol·|value|; a free
+            gap z̄, |e| ≤ atol + rtol·max|z̄ - z̄_start|.
+        atol: absolute local error tolerance on h̄ and on a free gap z̄ (units of d_c).
+        initial_step: the first step after t̄_start and after each velocity jump (units of
+            t_c), divided by max(1, β).
+        order: 2 (BDF2, default), 1 (backward Euler throughout) or 3 (BDF3 from a segment's
+            fourth step).
+        max_steps: the attempt budget (accepted + rejected), an integer.
+        force_floor: F̄ is held to rtol relative to max(|F̄|, force_floor × its peak so far)
+            (dimensionless).
+        film_error: "relative" (default) or "force", what the film's error is measured
+            against (:func:`film_scale`).
     """
 
     rtol: float = DEFAULT_RTOL
@@ -90,7 +98,13 @@ DEFAULT_TOLERANCE = Tolerance()
 
 
 class Status(enum.IntEnum):
-    """How a run stands; :func:`stop_reason` says it in words."""
+    """How a run stands; :func:`stop_reason` says it in words.
+
+    Attributes:
+        RUNNING: still running (at the end of a run: the attempt budget ran out).
+        DONE: ``t_end`` reached.
+        STEP_TOO_SMALL: the step size collapsed (every shorter step was rejected).
+    """
 
     RUNNING = 0  # (at the end of a run: the attempt budget ran out)
     DONE = 1
@@ -116,7 +130,16 @@ _STOP_REASONS = {
 
 
 def stop_reason(status, max_steps: int) -> str:
-    """Why a run with this final status stopped before t_end ('' if it did not)."""
+    """Why a run stopped before ``t_end``, in words.
+
+    Args:
+        status: the run's final :class:`Status` (or its integer, ``Trajectory.status``).
+        max_steps: the attempt budget the run had (``Settings.max_steps``), named in the
+            sentence.
+
+    Returns:
+        The reason and what to change, or '' for a run that reached ``t_end``.
+    """
     return _STOP_REASONS[Status(int(status))].format(max_steps=max_steps)
 
 

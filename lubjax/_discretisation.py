@@ -35,20 +35,44 @@ DISCRETISATION = "psi-weighted hats, radius-weighted conductance"
 
 
 class Discretisation(NamedTuple):
-    """Mesh-dependent arrays, computed once per mesh (a pytree of arrays: pass it to jit)."""
+    """Mesh-dependent arrays, computed once per mesh (a pytree of arrays: pass it to jit).
 
-    r: jax.Array  # nodes (N,)
-    cell_area: jax.Array  # A_i = (r²_{i+1/2} - r²_{i-1/2})/2, (N,)
-    face_r: jax.Array  # r_{i+1/2}, (N-1,)
-    face_gap: jax.Array  # r_{i+1} - r_i, (N-1,)
-    influence: jax.Array  # Ŵ, (N, N)
-    area_influence: jax.Array  # (A Ŵ)_ij restricted to the unknowns i, j < N-1
-    force_weights: jax.Array  # F̄ = c·p̄, (N,)
+    Build it with :func:`discretise`. Lengths are in units of √(R d_c).
+
+    Attributes:
+        r: the nodes r̄_i, shape (N,).
+        cell_area: A_i = (r̄²_{i+1/2} - r̄²_{i-1/2})/2, each node's cell's area measure, (N,).
+        face_r: r̄_{i+1/2}, the faces between nodes, (N-1,).
+        face_gap: r̄_{i+1} - r̄_i, (N-1,).
+        influence: Ŵ, the influence matrix (eq 21), (N, N).
+        area_influence: (A Ŵ)_ij restricted to the unknowns i, j < N-1, (N-1, N-1).
+        force_weights: c, with F̄ = c·p̄ (eq 11b), (N,).
+    """
+
+    r: jax.Array
+    cell_area: jax.Array
+    face_r: jax.Array
+    face_gap: jax.Array
+    influence: jax.Array
+    area_influence: jax.Array
+    force_weights: jax.Array
 
 
 def discretise(mesh: Mesh, substrate=None) -> Discretisation:
-    """All per-mesh arrays for a substrate's geometry (default: the half-space); cached, so the
-    influence matrix is built once per (mesh, elastic substrate)."""
+    """All per-mesh arrays for a substrate's geometry; cached, so the influence matrix is built
+    once per (mesh, elastic substrate).
+
+    Args:
+        mesh: the :class:`lubjax.Mesh`.
+        substrate: ``lubjax.HalfSpace()`` (None, the default), a ``Layer`` or a
+            ``Viscoelastic`` (its elastic geometry).
+
+    Returns:
+        Discretisation: float64 arrays on the default device.
+
+    Raises:
+        TypeError: ``substrate`` is not a substrate.
+    """
     return _discretise(mesh, as_substrate(substrate).elastic)
 
 
@@ -67,12 +91,29 @@ def _discretise(mesh: Mesh, elastic) -> Discretisation:
 
 
 def film_thickness(disc: Discretisation, z, pressure):
-    """h̄ = z̄ + r̄²/2 - w̄, w̄ = -Ŵp̄ (eqs 8a, 21)."""
+    """The film thickness h̄ = z̄ + r̄²/2 - w̄ with w̄ = -Ŵp̄ (eqs 8a, 21).
+
+    Args:
+        disc: the :class:`Discretisation`.
+        z: z̄, the sphere's gap (units of d_c); a scalar.
+        pressure: p̄ at the nodes (units of (2E*/π)√(d_c/R)), shape (N,).
+
+    Returns:
+        h̄ at the nodes (units of d_c), shape (N,).
+    """
     return z + 0.5 * disc.r**2 + disc.influence @ pressure
 
 
 def displacement(disc: Discretisation, pressure):
-    """Surface displacement w̄ = -Ŵp̄ (eq 21); ≤ 0 under positive pressure."""
+    """The surface displacement w̄ = -Ŵp̄ (eq 21).
+
+    Args:
+        disc: the :class:`Discretisation`.
+        pressure: p̄ at the nodes (units of (2E*/π)√(d_c/R)), shape (N,).
+
+    Returns:
+        w̄ at the nodes (units of d_c; ≤ 0 under a positive pressure), shape (N,).
+    """
     return -disc.influence @ pressure
 
 

@@ -81,30 +81,65 @@ class _Drive:
 
     @property
     def t_start(self):
+        """t̄ at which the run starts (units of t_c): the history's start."""
         return self.history.t_start
 
     def breakpoints_array(self):
+        """The times t̄ of the drive's velocity jumps (steps restart small there).
+
+        Returns:
+            A 1-D float64 array of t̄ (units of t_c).
+        """
         return self.history.breakpoints_array()
 
     def initial_gap(self, z0):
-        """z̄ at t̄_start, the sphere at rest."""
+        """The gap at t̄_start, the sphere at rest.
+
+        Args:
+            z0: z̄0 = z0/d_c (eq 8e), the gap before any travel.
+
+        Returns:
+            z̄ at t̄_start (units of d_c).
+        """
         return z0 - self.history.travel(self.history.t_start)
 
     def initial_velocity(self):
+        """dz̄/dt̄ at t̄_start (units of d_c/t_c): 0, the sphere at rest.
+
+        Returns:
+            v̄0.
+        """
         return 0.0
 
     def final_depth(self, z0):
-        """How deep the sphere ends up pressed into the substrate (d_c units; negative: it
-        stops short of it), for the mesh rule (:func:`lubjax.mesh_for`); None where the drive
-        does not prescribe where it ends (a spring, a free sphere)."""
+        """How deep the sphere ends up pressed into the substrate, for the mesh rule
+        (:func:`lubjax.mesh_for`).
+
+        Args:
+            z0: z̄0 = z0/d_c (eq 8e).
+
+        Returns:
+            The depth (units of d_c; negative: it stops short of the surface), or None where
+            the drive does not prescribe where it ends (a spring, a free sphere).
+        """
         return None
 
     def row(self, step):
-        """(α, s, b) of the closing row α F̄ⁿ⁺¹ + s Δz̄ = b for the step ``step``
-        (:class:`lubjax._stepper.StepRecord`: tⁿ = ``step.t`` → tⁿ⁺¹ = ``step.t_new``, Δt̄, the
-        BDF weights a₀..a₃ (a₃ None where no step can be BDF3) and the accepted levels, newest
-        first: ``step.history.gap_step[0]`` is Δz̄ⁿ = z̄ⁿ - z̄ⁿ⁻¹ as solved (not a difference of
-        the stored gaps, which rounds it to the gap's ulp), ``step.history.force[0]`` is F̄ⁿ)."""
+        """The closing row α F̄ⁿ⁺¹ + s Δz̄ = b of the step (the module docstring gives each
+        drive's α, s, b).
+
+        ``step.weights`` are the BDF weights a₀..a₃ (a₃ None where no step can be BDF3);
+        ``step.history.gap_step[0]`` is Δz̄ⁿ = z̄ⁿ - z̄ⁿ⁻¹ as solved (not a difference of the
+        stored gaps, which rounds it to the gap's ulp), ``step.history.force[0]`` is F̄ⁿ.
+
+        Args:
+            step: the step being taken (``lubjax._stepper.StepRecord``): tⁿ = ``step.t`` →
+                tⁿ⁺¹ = ``step.t_new``, Δt̄ = ``step.dt``, the BDF weights ``step.weights``
+                and the accepted levels ``step.history``, newest first.
+
+        Returns:
+            (α, s, b), scalars (traced under ``jit``) of the row α F̄ⁿ⁺¹ + s Δz̄ = b.
+        """
         raise NotImplementedError
 
 
@@ -116,7 +151,15 @@ def _monotone_approach(history):
 @dataclasses.dataclass(frozen=True, eq=False)
 class Travel(_Drive):
     """Prescribed travel d̄(t̄) toward the substrate: z̄ = z̄0 - d̄(t̄) (eqs 8c,d). The default
-    drive; ``relax(history=...)`` wraps its history in it."""
+    drive; ``relax(history=...)`` wraps its history in it.
+
+    Attributes:
+        history: d̄(t̄), the travel (units of d_c) against t̄ (units of t_c): ``RampHold()``
+            (default) or ``SampledTravel(t, values)``.
+
+    Raises:
+        TypeError: ``history`` is not a history.
+    """
 
     history: object = dataclasses.field(default_factory=RampHold)
     prescribes_gap = True
@@ -125,17 +168,33 @@ class Travel(_Drive):
         _check_history(self.history, "Travel(history)")
 
     def final_depth(self, z0):
-        """The largest travel less z̄0 (a sampled history's largest sample)."""
+        """How deep the sphere ends up: the largest travel less z̄0.
+
+        Args:
+            z0: z̄0 = z0/d_c (eq 8e).
+
+        Returns:
+            max d̄ - z̄0 (units of d_c; a sampled history's largest sample).
+        """
         samples = getattr(self.history, "travel_samples", None)
         final = self.history.travel(np.asarray([1e300])) if samples is None else samples
         return float(np.max(np.asarray(final))) - z0
 
     @property
     def force_nonnegative(self):
-        # Under a monotone approach or hold the film is only squeezed: its pressure pushes back.
+        """Whether a negative F̄ is an error of the step: true under a monotone approach or hold,
+        where the film is only squeezed and its pressure pushes back."""
         return _monotone_approach(self.history)
 
     def row(self, step):
+        """The closing row: α = 0, s = 1, b = d̄(tⁿ) - d̄(tⁿ⁺¹) (Δz̄ is prescribed).
+
+        Args:
+            step: the step being taken (``lubjax._stepper.StepRecord``).
+
+        Returns:
+            (α, s, b).
+        """
         # Δz̄ = d̄(tⁿ) - d̄(tⁿ⁺¹), not (z̄0 - d̄(tⁿ⁺¹)) - z̄ⁿ: that difference of O(1) gaps rounds
         # Δz̄ to the ulp of z̄ (2.2e-16 at z̄ ~ 1), a relative error of 1 in the squeeze velocity
         # once Δz̄ is that small (a smooth start, d̄ ∝ t̄², at Δt̄ ~ 1e-11: the layer's force
@@ -145,11 +204,21 @@ class Travel(_Drive):
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Load(_Drive):
-    """Prescribed force F̄(t̄) = ``scale`` × ``history``(t̄) (force control, creep).
+    """Prescribed force F̄(t̄) = ``scale`` × ``history``(t̄) (force control, creep; the paper's
+    Appendix).
 
-    ``history``: the load's shape, any history (``RampHold()``: ramp from 0 to 1 over t̄ ∈ [0, 1],
-    then held; ``SampledTravel(t, values)``: a sampled load, monotone-cubic interpolated). The
-    sphere starts at rest at z̄0 under the load F̄(t̄_start) (normally 0).
+    The sphere starts at rest at z̄0 under the load F̄(t̄_start) (normally 0).
+
+    Attributes:
+        scale: F̄ of the plateau (units of F_s, eq 11b), > 0; default 2π/3, the load whose
+            Hertz indentation is d_c.
+        history: the load's shape against t̄, any history: ``RampHold()`` (default; ramp from
+            0 to 1 over t̄ ∈ [0, 1], then held) or ``SampledTravel(t, values)`` (a sampled load,
+            monotone-cubic interpolated).
+
+    Raises:
+        ValueError: ``scale`` not > 0.
+        TypeError: ``history`` is not a history.
     """
 
     scale: float = 2.0 * np.pi / 3.0
@@ -161,24 +230,66 @@ class Load(_Drive):
         _check_history(self.history, "Load(history)")
 
     def initial_gap(self, z0):
+        """The gap at t̄_start: z̄0.
+
+        Args:
+            z0: z̄0 = z0/d_c (eq 8e).
+
+        Returns:
+            z̄0.
+        """
         return z0
 
     def load(self, t):
+        """The prescribed force.
+
+        Args:
+            t: t̄ (units of t_c); a scalar or an array.
+
+        Returns:
+            F̄(t̄) = ``scale`` × ``history``(t̄) (units of F_s).
+        """
         return self.scale * self.history.travel(t)
 
     def final_depth(self, z0):
-        """Hertz's indentation under the final load, (3F̄/(2π))^{2/3}."""
+        """How deep the sphere ends up: Hertz's indentation under the final load.
+
+        Args:
+            z0: z̄0 = z0/d_c (unused: the load, not the start, sets the depth).
+
+        Returns:
+            δ̄ = (3F̄/(2π))^{2/3} (units of d_c).
+        """
         final = float(np.asarray(self.load(np.asarray([1e300])))[0])
         return (3.0 * final / (2.0 * math.pi)) ** (2.0 / 3.0)
 
     def row(self, step):
+        """The closing row: α = 1, s = 0, b = F̄(tⁿ⁺¹).
+
+        Args:
+            step: the step being taken (``lubjax._stepper.StepRecord``).
+
+        Returns:
+            (α, s, b).
+        """
         return 1.0, 0.0, self.load(step.t_new)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Spring(_Drive):
-    """A stage with prescribed travel d̄(t̄) holds the sphere through a spring of stiffness K̄
-    (``stiffness``, units F_s/d_c: K̄ = π k/(2E*√(R d_c))). The sphere lags the stage by F̄/K̄."""
+    """A stage with prescribed travel d̄(t̄) holds the sphere through a spring: F̄ = K̄ (d̄(t̄) -
+    (z̄0 - z̄)), the sphere lagging the stage by F̄/K̄ (docs/model.md, Drives).
+
+    Attributes:
+        stiffness: K̄ = π k/(2E*√(R d_c)), the spring's stiffness (units F_s/d_c), > 0
+            (:func:`lubjax.spring_stiffness_bar`); K̄ → ∞ is :class:`Travel`.
+        history: d̄(t̄), the stage's travel (units of d_c): ``RampHold()`` (default) or
+            ``SampledTravel(t, values)``.
+
+    Raises:
+        ValueError: ``stiffness`` not > 0.
+        TypeError: ``history`` is not a history.
+    """
 
     stiffness: float = 1.0
     history: object = dataclasses.field(default_factory=RampHold)
@@ -189,9 +300,18 @@ class Spring(_Drive):
 
     @property
     def force_nonnegative(self):
+        """Whether a negative F̄ is an error of the step: true under a monotone approach."""
         return _monotone_approach(self.history)
 
     def row(self, step):
+        """The closing row: α = 1, s = -K̄, b = K̄ (d̄(tⁿ⁺¹) - d̄(tⁿ)) + F̄ⁿ.
+
+        Args:
+            step: the step being taken (``lubjax._stepper.StepRecord``).
+
+        Returns:
+            (α, s, b).
+        """
         k = self.stiffness
         # The spring's stretch at tⁿ is F̄ⁿ/K̄ (the last row), so b = K̄(d̄ⁿ⁺¹ - d̄ⁿ) + F̄ⁿ rather
         # than K̄(d̄ⁿ⁺¹ - (z̄0 - z̄ⁿ)), whose O(1) difference rounds the stretch to the ulp of z̄
@@ -204,12 +324,18 @@ class Spring(_Drive):
 class FreeSphere(_Drive):
     """A free sphere with inertia: dz̄/dt̄ = v̄, dv̄/dt̄ = G (F̄ - W̄).
 
-    Args:
-        inverse_mass: G = F_s t_c²/(m d_c) = 2β/(π St) with St = m V/(6π η R²), V = d_c/t_c.
-        velocity: v̄0, the initial dz̄/dt̄ (negative: approaching; -1 with t_c = x0/V).
-        weight: W̄ = W/F_s, a constant load toward the substrate (weight less buoyancy; 0 for
-            a collision without gravity).
     It starts at z̄0 with the film at rest (p̄ = 0). No velocity jumps: no breakpoints.
+
+    Attributes:
+        inverse_mass: G = F_s t_c²/(m d_c) = 2β/(π St), dimensionless, > 0, with the Stokes
+            number St = m V/(6π η R²), V = d_c/t_c.
+        velocity: v̄0, the initial dz̄/dt̄ (units of d_c/t_c; negative: approaching; -1 with
+            t_c = x0/V).
+        weight: W̄ = W/F_s, a constant load toward the substrate (units of F_s, ≥ 0; weight
+            less buoyancy; 0, the default, for a collision without gravity).
+
+    Raises:
+        ValueError: ``inverse_mass`` not > 0, ``velocity`` not finite or ``weight`` < 0.
     """
 
     inverse_mass: float = 1.0
@@ -224,18 +350,46 @@ class FreeSphere(_Drive):
 
     @property
     def t_start(self):
+        """t̄ at which the run starts: 0."""
         return 0.0
 
     def breakpoints_array(self):
+        """The velocity jumps: none.
+
+        Returns:
+            An empty array.
+        """
         return jnp.zeros((0,))
 
     def initial_gap(self, z0):
+        """The gap at the start: z̄0.
+
+        Args:
+            z0: z̄0 = z0/d_c (eq 8e), the starting gap (1 with the collision scales).
+
+        Returns:
+            z̄0.
+        """
         return z0
 
     def initial_velocity(self):
+        """dz̄/dt̄ at the start.
+
+        Returns:
+            v̄0 = ``velocity``.
+        """
         return self.velocity
 
     def row(self, step):
+        """The closing row: α = -Δt̄² G, s = a₀², b = a₀a₂Δz̄ⁿ - Δt̄ (a₁v̄ⁿ + a₂v̄ⁿ⁻¹) -
+        Δt̄² G W̄ (the module docstring derives it).
+
+        Args:
+            step: the step being taken (``lubjax._stepper.StepRecord``).
+
+        Returns:
+            (α, s, b).
+        """
         g, dt, (a0, a1, a2, a3) = self.inverse_mass, step.dt, step.weights
         gap_step, velocity = step.history.gap_step, step.history.velocity
         b = a0 * a2 * gap_step[0] - dt * (a1 * velocity[0] + a2 * velocity[1])
@@ -246,11 +400,20 @@ class FreeSphere(_Drive):
 
 
 def restitution(result, at_gap: float = 1.0) -> float:
-    """Coefficient of restitution of a :class:`FreeSphere` run: e = v̄/|v̄0| when the sphere,
-    moving away, first passes back through the gap ``at_gap`` (default z̄ = 1, its starting gap
-    x0 with the collision scales, as Davis et al. read it). NaN if it does not get back there
-    (no rebound, or the run ended first). The crossing is found on the stepper's interpolant
-    (bisection between the accepted steps that bracket it)."""
+    """The coefficient of restitution of a :class:`FreeSphere` run.
+
+    The crossing is found on the stepper's interpolant (bisection between the accepted steps
+    that bracket it).
+
+    Args:
+        result: the :class:`lubjax.Result` of a run with a :class:`FreeSphere` drive.
+        at_gap: z̄ at which the rebound speed is read (units of d_c); default 1, the starting
+            gap x0 with the collision scales, as Davis et al. read it.
+
+    Returns:
+        e = v̄/|v̄0| when the sphere, moving away, first passes back through ``at_gap``;
+        NaN if it does not get back there (no rebound, or the run ended first).
+    """
     t, gap, v = (np.asarray(a, float) for a in (result.t, result.gap, result.velocity))
     k = np.flatnonzero((gap[:-1] < at_gap) & (gap[1:] >= at_gap) & (v[1:] > 0))
     if not k.size:
@@ -266,7 +429,19 @@ def restitution(result, at_gap: float = 1.0) -> float:
 
 
 def as_drive(drive_or_history) -> _Drive:
-    """A drive, or a bare history (RampHold, SampledTravel) taken as a prescribed travel."""
+    """A drive for a drive or a history.
+
+    Args:
+        drive_or_history: a drive (returned as it is), a bare history (``RampHold``,
+            ``SampledTravel``: taken as a prescribed travel) or None (the default
+            ``Travel()``).
+
+    Returns:
+        The drive.
+
+    Raises:
+        TypeError: neither a drive nor a history.
+    """
     if drive_or_history is None:
         return Travel()
     if isinstance(drive_or_history, _Drive):

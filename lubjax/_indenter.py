@@ -28,6 +28,13 @@ class RampHold:
     With ``t_accel`` = t̄₁ > 0 the start is smoothed as in eq 23: the sphere starts from rest at
     t̄ = -t̄₁ with constant acceleration, z̄ = z̄0 - (t̄ + t̄²/(2t̄₁)) for -t̄₁ ≤ t̄ ≤ 0, so it has
     travelled -t̄₁/2 at t̄ = 0 (it starts t̄₁/2 above z̄0) and reaches unit speed there.
+
+    Attributes:
+        t_accel: t̄₁, the acceleration time (units of t_c), in [0, 1); 0 (default) starts at
+            unit speed.
+
+    Raises:
+        ValueError: ``t_accel`` not in [0, 1).
     """
 
     t_accel: float = 0.0
@@ -38,18 +45,34 @@ class RampHold:
 
     @property
     def t_start(self) -> float:
+        """t̄ at which the motion starts: -t̄₁ (units of t_c)."""
         return -self.t_accel
 
     @property
     def breakpoints(self) -> tuple[float, ...]:
+        """The times t̄ of the velocity jumps: 1 (the hold), and 0 with an acceleration."""
         return (0.0, 1.0) if self.t_accel > 0 else (1.0,)
 
     def breakpoints_array(self):
+        """The ``breakpoints`` as an array.
+
+        Returns:
+            A 1-D JAX array of t̄.
+        """
         return jnp.asarray(self.breakpoints)
 
     monotone = True  # never retracts
 
     def travel(self, t):
+        """The travel toward the substrate (eqs 8c,d; eq 23 with ``t_accel``).
+
+        Args:
+            t: t̄ (units of t_c); a scalar or an array.
+
+        Returns:
+            jax.Array: d̄(t̄) (units of d_c), shaped as ``t``; t̄ + t̄²/(2t̄₁) on [-t̄₁, 0), t̄ on [0, 1),
+            1 after.
+        """
         t = jnp.asarray(t)
         ramp = jnp.clip(t, 0.0, 1.0)
         if self.t_accel > 0:
@@ -70,10 +93,16 @@ class SampledTravel:
     derivative by central differences scattered by 1e-2 at rtol = 1e-6). The monotone cubic is
     C¹, never overshoots the samples, and reproduces a linear ramp exactly away from its ends.
 
-    Args:
-        t: sample times (dimensionless), strictly increasing.
-        travel: travel toward the substrate at those times (dimensionless, units of d_c).
-        breakpoints: times where the velocity jumps (default: detected start and end of motion).
+    Attributes:
+        t: sample times t̄ (units of t_c), strictly increasing, at least 2.
+        travel_samples: d̄, the travel toward the substrate at those times (units of d_c), as
+            many as ``t``.
+        breakpoints: times t̄ where the velocity jumps (default: the detected start and end of
+            the motion).
+
+    Raises:
+        ValueError: ``t`` and ``travel_samples`` not finite 1-D arrays of one length ≥ 2,
+            ``t`` not strictly increasing, or ``breakpoints`` not finite.
     """
 
     t: np.ndarray
@@ -102,12 +131,27 @@ class SampledTravel:
 
     @property
     def t_start(self):
+        """t̄ at which the record starts: the first sample time (units of t_c)."""
         return self.t[0]
 
     def breakpoints_array(self):
+        """The ``breakpoints`` as an array.
+
+        Returns:
+            A 1-D JAX array of t̄.
+        """
         return jnp.asarray(self.breakpoints)
 
     def travel(self, t):
+        """The interpolated travel.
+
+        Args:
+            t: t̄ (units of t_c); a scalar or an array.
+
+        Returns:
+            jax.Array: d̄(t̄) (units of d_c), shaped as ``t``; the monotone cubic through the samples,
+            constant before the first and after the last.
+        """
         t = jnp.asarray(t)
         knots, d, m = (jnp.asarray(a) for a in (self.t, self.travel_samples, self.slopes))
         i = jnp.clip(jnp.searchsorted(knots, t, side="right") - 1, 0, knots.shape[0] - 2)

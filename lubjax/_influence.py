@@ -74,7 +74,19 @@ def pressure_weight(r):
 
 
 def kernel(u: np.ndarray, r: float | np.ndarray, distance: np.ndarray | None = None) -> np.ndarray:
-    """G(ū, r̄) = ū/(ū+r̄) K(4ūr̄/(ū+r̄)²); ``distance`` = ū - r̄ if known more accurately."""
+    """The kernel of the elastic integral (eqs 8b, 21): G(ū, r̄) = ū/(ū+r̄) K(4ūr̄/(ū+r̄)²).
+
+    K is the complete elliptic integral of the first kind, log-singular at ū = r̄.
+
+    Args:
+        u: ū, source radii (units of √(R d_c)); an array.
+        r: r̄, the collocation radius or radii (units of √(R d_c)), broadcast with ``u``.
+        distance: ū - r̄ where it is known more accurately than the difference (near the
+            singularity); None (default) computes it.
+
+    Returns:
+        G, dimensionless, broadcast shape of ``u`` and ``r``.
+    """
     u = np.asarray(u, dtype=np.float64)
     d = (u - r) if distance is None else distance
     s = u + r
@@ -84,11 +96,20 @@ def kernel(u: np.ndarray, r: float | np.ndarray, distance: np.ndarray | None = N
 
 @functools.lru_cache(maxsize=32)
 def influence_matrix(mesh: Mesh, weighted: bool = True) -> np.ndarray:
-    """Ŵ (N×N) with w̄_i = -Σ_j Ŵ_ij p̄_j for p̄ represented by (P) on ``mesh``; with
-    ``weighted=False`` by plain hat functions (ψ ≡ 1: the finite layer's representation,
-    lubjax/_layer.py).
+    """The half-space's influence matrix (eq 21): w̄_i = -Σ_j Ŵ_ij p̄_j.
 
-    Cached per mesh: a fit or a sweep reuses it. Returned read-only.
+    Ŵ_ij = (8/π²) ∫ G(ū, r̄_i) φ_j(ū) dū, with the pressure represented as ψ(r̄) times the hat
+    interpolant of p̄/ψ, ψ = (1 + r̄²/2)⁻² (docs/model.md, Discretisation), by tanh-sinh
+    quadrature with the log singularity at an element end. Cached per mesh: a fit or a sweep
+    reuses it.
+
+    Args:
+        mesh: the :class:`lubjax.Mesh`.
+        weighted: True (default) for the ψ-weighted representation; False for plain hat
+            functions (ψ ≡ 1: the finite layer's representation).
+
+    Returns:
+        Ŵ, an (N, N) float64 array, read-only.
     """
     r = mesh.r
     n = r.size
@@ -117,7 +138,15 @@ def influence_matrix(mesh: Mesh, weighted: bool = True) -> np.ndarray:
 
 
 def force_weights(mesh: Mesh) -> np.ndarray:
-    """c with F̄ = c·p̄ = 2π ∫ p̄ r̄ dr̄ (eq 11b) exactly for p̄ represented by (P)."""
+    """The force weights: F̄ = c·p̄ = 2π ∫ p̄ r̄ dr̄ (eq 11b), exact for the ψ-weighted hat
+    representation of p̄ (docs/model.md, Discretisation).
+
+    Args:
+        mesh: the :class:`lubjax.Mesh`.
+
+    Returns:
+        numpy.ndarray: c, N float64 weights (F̄ per unit p̄ at each node).
+    """
     r = mesh.r
     a, b = r[:-1, None], r[1:, None]
     u = a + (b - a) * _GL_X[None, :]

@@ -106,8 +106,19 @@ _PSI_SERIES = np.array(
 
 
 def layer_thickness_bar(H: float, R: float, d_c: float) -> float:
-    """H̄ = H/√(R d_c): a layer thickness H (m) in the units of r̄ for a sphere of radius R (m)
-    and indentation depth d_c (m)."""
+    """A layer's thickness in the units of r̄ (docs/model.md, Substrates).
+
+    Args:
+        H: H, the layer's thickness [m], > 0.
+        R: R, the sphere's radius [m], > 0.
+        d_c: d_c, the indentation depth [m], > 0.
+
+    Returns:
+        H̄ = H/√(R d_c), dimensionless.
+
+    Raises:
+        ValueError: a length not a finite number > 0.
+    """
     for name, value in (("H", H), ("R", R), ("d_c", d_c)):
         check_positive(f"layer_thickness_bar: {name}", value, "m")
     return float(H) / math.sqrt(float(R) * float(d_c))
@@ -256,12 +267,25 @@ def layer_correction(mesh: Mesh, thickness: float, poisson: float, interface: st
 def layer_influence_matrix(
     mesh: Mesh, thickness: float, poisson: float = 0.5, interface: str = "bonded"
 ) -> np.ndarray:
-    """Ŵ (N×N) of a layer of thickness H̄ on a rigid base: w̄_i = -Σ_j Ŵ_ij p̄_j for the nodal
-    pressures p̄ on ``mesh``, piecewise linear between them (plain hat functions: module
-    docstring; ``influence_matrix(mesh, weighted=False)`` is its half-space limit).
+    """The influence matrix of a layer on a rigid base: w̄_i = -Σ_j Ŵ_ij p̄_j for the nodal
+    pressures p̄ on ``mesh``, piecewise linear between them.
 
-    Cached per (mesh, H̄, ν, interface); returned read-only. Raises ValueError for a layer too
-    thin for the mesh (the k̄ quadrature would exceed ``MAX_NODES``).
+    The half-space's matrix with plain hat functions (``influence_matrix(mesh,
+    weighted=False)``, its H̄ → ∞ limit) plus the smooth remainder of the transfer function
+    C(kH) - 1 (docs/model.md, Substrates). Cached per (mesh, H̄, ν, interface).
+
+    Args:
+        mesh: the :class:`lubjax.Mesh`.
+        thickness: H̄ = H/√(R d_c), dimensionless, > 0.
+        poisson: ν, dimensionless, in (-1, 0.5] (default 0.5).
+        interface: "bonded" (default) or "frictionless" (``LAYER_BASES``).
+
+    Returns:
+        Ŵ, an (N, N) float64 array, read-only.
+
+    Raises:
+        ValueError: a thickness, Poisson's ratio or interface out of range, or a layer too
+            thin for the mesh (the k̄ quadrature would exceed ``MAX_NODES``).
     """
     thickness = check_positive("layer thickness", float(thickness))
     poisson = check_poisson("layer poisson", float(poisson))

@@ -25,7 +25,12 @@ class Mesh:
     """An immutable, hashable radial mesh (dimensionless r̄ = r/√(R d_c)).
 
     Attributes:
-        nodes: tuple of node positions, strictly increasing, first node 0.
+        nodes: tuple of node positions r̄ (units of √(R d_c)), strictly increasing, first
+            node 0, at least 4.
+
+    Raises:
+        ValueError: fewer than 4 nodes, a first node other than 0, or nodes not finite and
+            strictly increasing.
     """
 
     nodes: tuple[float, ...]
@@ -41,18 +46,25 @@ class Mesh:
 
     @property
     def r(self) -> np.ndarray:
+        """The nodes r̄ as a float64 array."""
         return np.asarray(self.nodes, dtype=np.float64)
 
     @property
     def size(self) -> int:
+        """The number of nodes N."""
         return len(self.nodes)
 
     @property
     def length(self) -> float:
+        """The domain length L̄, the last node (p̄ = 0 there)."""
         return self.nodes[-1]
 
     def coarsened(self) -> Mesh:
-        """The nested mesh of every other node (the outer node kept): for error estimates."""
+        """The nested mesh of every other node, the outer node kept (for error estimates).
+
+        Returns:
+            Mesh: the coarser mesh.
+        """
         nodes = self.nodes[::2]
         if nodes[-1] != self.nodes[-1]:
             nodes = (*nodes[:-1], self.nodes[-1])
@@ -60,7 +72,18 @@ class Mesh:
 
 
 def uniform_mesh(dr: float, length: float) -> Mesh:
-    """Uniform mesh of spacing ``dr`` on [0, length] (the paper's: dr=0.01, length=4)."""
+    """A uniform mesh of spacing ``dr`` on [0, length] (the paper's: dr = 0.01, length = 4).
+
+    Args:
+        dr: Δr̄, the spacing (units of √(R d_c)), 0 < dr < length.
+        length: L̄, the domain length (units of √(R d_c)), rounded to a whole number of cells.
+
+    Returns:
+        Mesh: the mesh.
+
+    Raises:
+        ValueError: not 0 < dr < length.
+    """
     if not (dr > 0 and length > 0 and dr < length):
         raise ValueError(f"uniform_mesh needs 0 < dr < length, got dr={dr}, length={length}")
     n = int(round(length / dr))
@@ -98,15 +121,25 @@ def graded_mesh(
     flow outside the contact needs.
 
     Args:
-        dr: spacing in the fine zone, which must cover the Hertz contact radius √(1 - z̄0) ≤ 1 and
-            the pressure rim around it.
-        r_fine: outer edge of the fine zone.
-        length: domain length L̄ (p̄ = 0 there). The dropped force fraction is ~ 4 z̄/L̄².
-        growth: ratio of neighbouring cell sizes outside the fine zone (1 < growth ≤ 1.5).
-        rim, rim_dr: inside the fine zone the spacing is min(dr, rim_dr + (RIM_GROWTH - 1)|r̄ -
-            rim|) (then scaled so the zone still ends at a node).
-        contact_dr: with ``rim``, the spacing on [0, rim] is at most contact_dr, and grows by
-            RIM_GROWTH outside it: min(dr, contact_dr + (RIM_GROWTH - 1) max(r̄ - rim, 0)).
+        dr: Δr̄, spacing in the fine zone (units of √(R d_c)), > 0; the zone must cover the
+            Hertz contact radius √(1 - z̄0) ≤ 1 and the pressure rim around it.
+        r_fine: outer edge of the fine zone (units of √(R d_c)), dr < r_fine < length.
+        length: L̄, the domain length (units of √(R d_c); p̄ = 0 there). The dropped force
+            fraction is ~ 4 z̄/L̄² (docs/model.md, far field).
+        growth: ratio of neighbouring cell sizes outside the fine zone, in (1, 1.5].
+        rim: r̄ to refine around (units of √(R d_c)), in [0, r_fine), or None; inside the
+            fine zone the spacing is then min(dr, rim_dr + (RIM_GROWTH - 1)|r̄ - rim|), scaled
+            so the zone still ends at a node.
+        rim_dr: the spacing at ``rim``, in (0, dr]; required with ``rim``.
+        contact_dr: with ``rim``, the spacing on [0, rim] is at most contact_dr, in (0, dr],
+            and grows by RIM_GROWTH outside it: min(dr, contact_dr + (RIM_GROWTH - 1)
+            max(r̄ - rim, 0)).
+
+    Returns:
+        Mesh: the mesh.
+
+    Raises:
+        ValueError: a spacing, edge, growth or refinement out of the ranges above.
     """
     if not dr > 0:
         raise ValueError(f"dr must be > 0, got {dr}")
@@ -273,7 +306,16 @@ def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
         settings: a :class:`lubjax.Settings`.
         drive: a drive (``lubjax.Travel(history)``, ``Load``, ``Spring``, ``FreeSphere``;
             ``lubjax.as_drive(history)`` for a bare history).
-        beta, z0: β and z̄0 of the run. t_end: its final time t̄.
+        beta: β of the run (eq 8e), in ``BETA_RANGE``.
+        z0: z̄0 = z0/d_c of the run (eq 8e), in ``Z0_RANGE``.
+        t_end: its final time t̄ (units of t_c), in (0, 1e9].
+
+    Returns:
+        Mesh: the mesh.
+
+    Raises:
+        TypeError: ``drive`` is not a drive.
+        ValueError: β, z̄0 or ``t_end`` out of range (the message names it).
     """
     if not callable(getattr(drive, "final_depth", None)):
         raise TypeError(

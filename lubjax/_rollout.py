@@ -44,7 +44,20 @@ class Output(NamedTuple):
 
 
 class State(NamedTuple):
-    """The loop's state at the last accepted level tⁿ. A pytree."""
+    """The loop's state at the last accepted level tⁿ. A pytree.
+
+    Attributes:
+        t: tⁿ, the last accepted time t̄ (units of t_c).
+        history: the accepted levels the BDF formula needs, newest first
+            (``lubjax._stepper.History`` of ``Level``).
+        peaks: running maxima the error norm scales by (``lubjax._controller.Peaks``).
+        controller: the step-size controller's memory (``lubjax._controller.ControllerState``).
+        accepted: the number of accepted steps so far.
+        rejected: the number of rejected attempts so far.
+        status: how the run stands (:class:`Status`, as an integer).
+        output: the saver's state (``Output``): where the kept levels' entries are and the
+            profiles interpolated so far.
+    """
 
     t: jax.Array
     history: History  # accepted levels, newest first (lubjax._stepper.Level)
@@ -58,7 +71,26 @@ class State(NamedTuple):
 
 class Step(NamedTuple):
     """One output entry per attempt (entry 0: the initial state). A rejected attempt, or one after
-    the run ended, repeats the last accepted level, so the entries are sorted in ``t``."""
+    the run ended, repeats the last accepted level, so the entries are sorted in ``t``.
+
+    In a :class:`Trajectory` every field has a leading axis of ``max_steps + 1`` entries.
+
+    Attributes:
+        t: t̄ of the entry (units of t_c).
+        force: F̄ (eq 11b; units of F_s).
+        film_center: h̄ at r̄ = 0 (units of d_c).
+        film_min: min_i h̄_i (units of d_c).
+        outflow: volume flux out through the last face, per unit 2π (units of R d_c²/t_c).
+        gap: z̄, the sphere's position (units of d_c; its approach is z̄0 - z̄).
+        velocity: dz̄/dt̄ (units of d_c/t_c; the step's BDF derivative, or the free sphere's
+            velocity).
+        elastic_energy: Ū = π Σ A_i p̄_i (Ŵp̄)_i = ½ ∫ p̄ (-w̄) dĀ (units of F_s d_c).
+        dissipation: the viscous power D̄ = 2π Σ_faces g (Δp̄)² (units of F_s d_c/t_c).
+        accepted: whether this entry is a new accepted level.
+        stencil: the entries of levels n-2, n-1 and n, for the interpolant, shape (3,).
+        degree: the degree of the step's interpolant: 1 (backward Euler), 2 (BDF2) or
+            3 (BDF3).
+    """
 
     t: jax.Array
     force: jax.Array  # F̄ (eq 11b)
@@ -75,7 +107,18 @@ class Step(NamedTuple):
 
 
 class Trajectory(NamedTuple):
-    """What :func:`rollout` returns: the step entries, the profiles, and how the run ended."""
+    """What :func:`rollout` returns: the step entries, the profiles, and how the run ended.
+
+    Attributes:
+        steps: the :class:`Step` entries, leading axis ``max_steps + 1``.
+        profiles: p̄ at the requested profile times, shape (P, N).
+        profile_gaps: z̄ at the requested profile times, shape (P,).
+        profile_films: h̄ at the requested profile times, shape (P, N).
+        status: how the run ended (:class:`Status` as an integer; :func:`stop_reason`).
+        accepted: the number of accepted steps.
+        rejected: the number of rejected attempts.
+        t_final: the last accepted time t̄ (``t_end`` when it finished).
+    """
 
     steps: Step  # leading axis: max_steps + 1 entries
     profiles: jax.Array  # p̄ at the requested times, (P, N)
@@ -229,16 +272,35 @@ def rollout(
     substrate=None,
     mode: str = "forward",
 ) -> Trajectory:
-    """Integrate a run from rest to ``t_end`` with error control.
+    """Integrate a run (eq 8, with the drive's closing row) from rest to ``t_end`` with error
+    control.
 
-    ``drive``: what moves the sphere (:mod:`lubjax._drives`: ``Travel``, ``Load``, ``Spring``,
-    ``FreeSphere``), or a bare travel history (``RampHold``, ``SampledTravel``) for a prescribed
-    travel. ``substrate`` (:mod:`lubjax._substrate`): ``HalfSpace()`` (default), ``Layer``,
-    ``Viscoelastic``; ``disc`` must come from ``discretise(mesh, substrate)`` (the geometry's
-    influence matrix). Every drive and substrate takes this one code path. Pure and
-    jit/vmap/jvp-compatible in ``beta``, ``z0``, ``t_end`` and the drive's and substrate's
-    leaves. ``mode="reverse"`` also supports vjp / ``jax.grad`` (a checkpointed scan over
-    ``tol.max_steps`` attempts). Read values at any times with :func:`evaluate`.
+    Every drive and substrate takes this one code path. Pure and jit/vmap/jvp-compatible in
+    ``beta``, ``z0``, ``t_end`` and the drive's and substrate's leaves. Read values at any
+    times with :func:`evaluate`.
+
+    Args:
+        disc: the :class:`Discretisation`, from ``discretise(mesh, substrate)`` (the
+            geometry's influence matrix).
+        beta: β (eq 8e), dimensionless, > 0; may be traced.
+        z0: z̄0 = z0/d_c (eq 8e), dimensionless; may be traced.
+        drive: what moves the sphere (``lubjax.Travel``, ``Load``, ``Spring``,
+            ``FreeSphere``), or a bare travel history (``RampHold``, ``SampledTravel``) for a
+            prescribed travel.
+        t_end: final time t̄ (units of t_c), > t̄_start; may be traced.
+        tol: the controller's :class:`Tolerance` (default ``DEFAULT_TOLERANCE``).
+        profile_times: times t̄ at which p̄, z̄ and h̄ profiles are interpolated (None: none).
+        substrate: ``lubjax.HalfSpace()`` (None, the default), a ``Layer`` or a
+            ``Viscoelastic``; the same geometry as ``disc``.
+        mode: "forward" (default; a ``while_loop``: jvp and vmap) or "reverse" (a checkpointed
+            ``lax.scan`` over ``tol.max_steps`` attempts: also vjp and ``jax.grad``).
+
+    Returns:
+        Trajectory: the step entries, profiles and final status.
+
+    Raises:
+        ValueError: an unknown ``mode``, or ``tol.order`` not 1, 2 or 3.
+        TypeError: ``drive`` or ``substrate`` of the wrong kind.
     """
     if mode not in ("forward", "reverse"):
         raise ValueError(f"mode must be 'forward' or 'reverse', got {mode!r}")
@@ -303,18 +365,37 @@ def rollout(
 
 
 def evaluate(steps: Step, times, field: str = "force"):
-    """``field`` of the run at ``times`` by the stepper's own interpolant (of each step's order:
-    cubic for BDF3 steps, quadratic for BDF2, linear for backward Euler). Times past the end of
-    the run give NaN; before the start, the initial value. Differentiable, vmappable;
-    independent of which times are asked.
+    """A field of the run at any times, by the stepper's own interpolant (of each step's order:
+    cubic for BDF3 steps, quadratic for BDF2, linear for backward Euler).
+
+    Differentiable and vmappable; the values do not depend on which other times are asked.
+
+    Args:
+        steps: the run's :class:`Step` entries (``Trajectory.steps``).
+        times: t̄ (units of t_c); a scalar or an array.
+        field: a per-step series of :class:`Step`: "force" (default), "film_min",
+            "film_center", "outflow", "gap", "velocity", "elastic_energy" or "dissipation".
+
+    Returns:
+        jax.Array: the field at ``times``, shaped as ``times``; NaN past the end of the run,
+        the initial value before its start.
     """
     return _evaluate(jnp, steps, times, field)
 
 
 def evaluate_host(steps: Step, times, field: str = "force") -> np.ndarray:
     """:func:`evaluate` in NumPy, for a finished run on the host: the same arithmetic without
-    compiling anything (compiling even this small program costs ~0.2 s, a fresh ``relax``
-    call's error estimate and every new length of ``Result.at``'s times paid it)."""
+    compiling anything (compiling even this small program costs ~0.2 s, for every new length
+    of ``times``).
+
+    Args:
+        steps: the run's :class:`Step` entries (``Trajectory.steps``; JAX or NumPy arrays).
+        times: t̄ (units of t_c); a scalar or an array.
+        field: a per-step series of :class:`Step`, as for :func:`evaluate` (default "force").
+
+    Returns:
+        numpy.ndarray: the field at ``times``, float64, shaped as ``times``.
+    """
     steps = Step(*(np.asarray(a) for a in steps))
     return _evaluate(np, steps, np.asarray(times, np.float64), field)
 

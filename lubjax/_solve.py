@@ -33,7 +33,8 @@ from ._threads import single_threaded_blas
 
 
 class SolverError(RuntimeError):
-    """A run produced NaN or a negative film, or could not reach t_end: see the message."""
+    """A run produced NaN or a negative film, or could not reach t_end (:func:`relax` with
+    ``check="raise"``); the message says which, and where (``Result.problems()``)."""
 
 
 
@@ -140,6 +141,14 @@ class Settings:
                                  "r_fine")
 
     def mesh_parameters(self) -> tuple[float, float, float]:
+        """The mesh's numbers, each the setting where given, else the one rtol chooses
+        (docs/model.md, Discretisation: Δr̄ = 0.014 s, growth 1 + 0.15 s with
+        s = (rtol/10⁻⁴)^{1/4}, L̄ = √(100/(3 rtol))).
+
+        Returns:
+            (Δr̄, growth, L̄): the fine zone's spacing and the domain length (units of
+            √(R d_c)) and the cell-size ratio beyond ``r_fine``.
+        """
         dr, growth, length = mesh_from_tolerance(self.rtol)
         return (
             self.dr if self.dr is not None else dr,
@@ -150,10 +159,23 @@ class Settings:
     def mesh(self, contact_radius: float | None = None,
              contact_refinement: float | None = None,
              rim_refinement: float | None = None) -> Mesh:
-        """The mesh; refined around ``contact_radius`` if given, else around a numeric
-        ``Settings.contact_radius``, at it by ``rim_refinement`` and inside it by
-        ``contact_refinement`` (defaults ``Settings.rim_refinement`` and
-        ``Settings.contact_refinement``; :func:`relax` passes what the run needs)."""
+        """The mesh of these settings, refined around a contact's edge where one is given
+        (:func:`lubjax.graded_mesh`).
+
+        Args:
+            contact_radius: r̄ to refine around (units of √(R d_c)), in [0, r_fine); None
+                (default): the numeric ``Settings.contact_radius``, if it is one.
+            contact_refinement: refinement factor inside it (dimensionless, ≥ 1); None:
+                ``Settings.contact_refinement``.
+            rim_refinement: refinement factor at it (dimensionless, ≥ 1); None:
+                ``Settings.rim_refinement``. :func:`relax` passes what the run needs.
+
+        Returns:
+            lubjax.Mesh: the mesh.
+
+        Raises:
+            ValueError: a radius or factor :func:`lubjax.graded_mesh` refuses.
+        """
         dr, growth, length = self.mesh_parameters()
         rim = contact_radius
         if rim is None and not isinstance(self.contact_radius, str):
@@ -168,6 +190,12 @@ class Settings:
         )
 
     def tolerance(self) -> Tolerance:
+        """The step controller's part of the settings.
+
+        Returns:
+            lubjax.stepper.Tolerance: rtol, atol, initial_step, order, max_steps,
+            force_floor, film_error).
+        """
         return Tolerance(
             self.rtol, self.atol, self.initial_step, self.order, self.max_steps, self.force_floor,
             self.film_error,
@@ -175,15 +203,27 @@ class Settings:
 
 
 class Plan(NamedTuple):
-    """Everything that does not depend on (β, z̄0): reuse it across runs, fits and sweeps."""
+    """Everything that does not depend on (β, z̄0): reuse it across runs, fits and sweeps.
+
+    Build it with :func:`make_plan`.
+
+    Attributes:
+        disc: the discretisation of ``mesh`` on ``substrate`` (:func:`lubjax.stepper.discretise`).
+        tol: the step controller's tolerance (:class:`lubjax.stepper.Tolerance`).
+        drive: the drive (``lubjax.Travel``, ``Load``, ``Spring``, ``FreeSphere``).
+        t_end: final time t̄ (units of t_c).
+        t: output times t̄ of :func:`force_curve` (a 1-D float64 array).
+        mesh: the :class:`lubjax.Mesh`.
+        substrate: ``lubjax.HalfSpace()`` (default), a ``Layer`` or a ``Viscoelastic``.
+    """
 
     disc: Discretisation
     tol: Tolerance
-    drive: object  # a drive (lubjax.Travel, Load, Spring, FreeSphere)
+    drive: object
     t_end: float
-    t: np.ndarray  # output times of force_curve
+    t: np.ndarray
     mesh: Mesh
-    substrate: object = HalfSpace()  # lubjax.HalfSpace, Layer, Viscoelastic
+    substrate: object = HalfSpace()
 
 
 def _drive_of(history, drive):
@@ -219,7 +259,7 @@ def make_plan(
             spaced times from the drive's start to ``t_end``).
 
     Returns:
-        The :class:`Plan`, the fixed (not differentiated) half of :func:`force_curve`'s inputs.
+        Plan: the fixed (not differentiated) half of :func:`force_curve`'s inputs.
 
     Raises:
         ValueError: both ``history`` and ``drive``, a ``t_end`` not after the start, or
@@ -342,25 +382,49 @@ def _check_x64():
 class Result:
     """A relaxation run (dimensionless). Arrays are numpy.
 
+    The per-step series are at the accepted step times ``t``; read any of them at other
+    times with :meth:`at` (the stepper's interpolant).
+
     Attributes:
-        t: accepted step times t̄ (the controller's); force F̄, film_min min h̄, film_center h̄(0)
-            and outflow (volume flux through the outer boundary per unit 2π) at those times;
-            gap z̄ (the sphere's position: prescribed by a travel, free under other drives),
-            velocity dz̄/dt̄, elastic_energy Ū and viscous dissipation rate D̄ (units F_s d_c
-            and F_s d_c/t_c: dŪ/dt̄ + F̄ dz̄/dt̄ = -D̄).
-            Read any of them at other times with :meth:`at` (the stepper's interpolant).
-        profile_times: the requested profile times; r: the mesh;
-        pressure, displacement, film: p̄, w̄, h̄ at those times, shape (len(profile_times), N).
-        finite: no NaN/inf; film_positive: h̄ > 0 at every accepted step;
-        finished: t_end reached (not stopped by the step budget or a collapsing step).
-        force_error: estimated error of ``force`` at ``t`` (NaN if Settings.error_estimate is
-            off), from the nested coarse mesh at rtol and 8 rtol (:func:`error_estimate`).
-            Zero where the drive prescribes the force. gap_error, film_center_error,
-            film_min_error: the same for z̄ (zero where the drive prescribes the travel),
-            h̄(0) and min h̄. A film error near the film itself says the mesh does not resolve
-            that film (late thin necks at large β t̄).
-        accepted, rejected: step counts. compile_s, run_s: wall time of compilation (0 when
-            cached) and of the run itself.
+        beta: β of the run (eq 8e).
+        z0: z̄0 = z0/d_c of the run (eq 8e).
+        t_end: the requested final time t̄ (units of t_c).
+        t: accepted step times t̄ (the controller's), 1-D.
+        force: F̄ = 2π∫p̄ r̄ dr̄ at ``t`` (eq 11b; units of F_s).
+        film_min: min h̄ over the mesh at ``t`` (units of d_c).
+        film_center: h̄(0), the film on the axis, at ``t`` (units of d_c).
+        outflow: volume flux through the outer boundary per unit 2π at ``t`` (units of
+            R d_c²/t_c).
+        gap: z̄, the sphere's position at ``t`` (units of d_c; prescribed by a travel, free
+            under other drives).
+        velocity: dz̄/dt̄ at ``t`` (units of d_c/t_c).
+        elastic_energy: Ū, the substrate's elastic energy at ``t`` (units of F_s d_c).
+        dissipation: D̄, the viscous dissipation rate at ``t`` (units of F_s d_c/t_c):
+            dŪ/dt̄ + F̄ dz̄/dt̄ = -D̄.
+        r: the mesh's nodes r̄ (units of √(R d_c)), N of them.
+        profile_times: the requested profile times t̄.
+        pressure: p̄ at ``profile_times``, shape (len(profile_times), N) (units of
+            (2E*/π)√(d_c/R), eq 7).
+        displacement: w̄ at ``profile_times``, same shape (units of d_c; ≤ 0 into the
+            substrate).
+        film: h̄ = z̄ + r̄²/2 - w̄ at ``profile_times`` (eq 8), same shape (units of d_c).
+        finite: no NaN or inf anywhere.
+        film_positive: h̄ > 0 at every accepted step.
+        finished: ``t_end`` reached (not stopped by the step budget or a collapsing step).
+        stop_reason: why the run stopped, in words (:func:`lubjax.stepper.stop_reason`).
+        force_error: estimated error of ``force`` at ``t`` (NaN if ``Settings.error_estimate``
+            is off), from the nested coarse mesh at rtol and 8 rtol; zero where the drive
+            prescribes the force.
+        gap_error: the same for z̄ (zero where the drive prescribes the travel).
+        film_center_error: the same for h̄(0).
+        film_min_error: the same for min h̄. An error near the film itself says the mesh does
+            not resolve that film (late thin necks at large β t̄; :meth:`unresolved_film`).
+        accepted: the number of accepted steps.
+        rejected: the number of rejected step attempts.
+        compile_s: wall time of compilation [s] (0 when cached).
+        run_s: wall time of the run itself [s].
+        steps: the stepper's record of every accepted step (:class:`lubjax.stepper.Step`),
+            which :meth:`at` interpolates.
     """
 
     beta: float
@@ -396,17 +460,35 @@ class Result:
 
     @property
     def ok(self) -> bool:
+        """Whether the run is sound: ``finite``, ``film_positive`` and ``finished``."""
         return self.finite and self.film_positive and self.finished
 
     def at(self, times, field: str = "force") -> np.ndarray:
-        """``field`` (force, film_min, film_center, gap, velocity, ...: any per-step series) at
-        any ``times`` in [t̄_start, t_end], by the stepper's interpolant."""
+        """A per-step series at any times, by the stepper's interpolant.
+
+        Args:
+            times: t̄ (units of t_c) in [t̄_start, t_end]; a scalar or a 1-D sequence.
+            field: the series: "force" (default), "film_min", "film_center", "outflow",
+                "gap", "velocity", "elastic_energy" or "dissipation".
+
+        Returns:
+            The series at ``times`` (a 1-D float64 array, in the series' units).
+
+        Raises:
+            ValueError: an unknown ``field``, or ``times`` not finite or outside the run.
+        """
         if field not in _SERIES[1:]:
             raise ValueError(f"field must be one of {', '.join(_SERIES[1:])}; got {field!r}")
         times = check_times(times, "times", float(self.t[0]), self.t_end)
         return evaluate_host(self.steps, times, field)
 
     def problems(self) -> list[str]:
+        """What is wrong with the run, in words (empty when :attr:`ok`).
+
+        Returns:
+            list[str]: one sentence per problem, NaN or inf, a negative film (where and how
+            thin), a run that stopped before ``t_end`` (where and why).
+        """
         out = []
         if not self.finite:
             out.append("the solution contains NaN or inf")
@@ -419,10 +501,20 @@ class Result:
         return out
 
     def unresolved_film(self, fraction: float = 0.3) -> str | None:
-        """A note if the estimated error of min h̄ exceeds ``fraction`` of it anywhere, else
-        None. Not an error: the force can still be accurate (it is Hertz's there). Two causes:
-        the mesh may not resolve a late neck at large β t̄, and ``Settings.film_error="force"``
-        holds thin films inside a contact only through the force they move."""
+        """Whether the thinnest film is resolved (late necks at large β t̄ may not be).
+
+        Not an error: the force can still be accurate (it is Hertz's there). Two causes: the
+        mesh may not resolve a late neck at large β t̄, and ``Settings.film_error="force"``
+        holds thin films inside a contact only through the force they move.
+
+        Args:
+            fraction: how large an estimated error of min h̄, relative to min h̄ itself, counts
+                as unresolved (dimensionless, > 0; default 0.3).
+
+        Returns:
+            A note naming the first time ``film_min_error`` exceeds ``fraction`` × min h̄,
+            or None where it never does (or where ``Settings.error_estimate`` was off).
+        """
         bad = self.film_min_error > fraction * np.abs(self.film_min)
         if not np.any(bad):
             return None
@@ -510,7 +602,7 @@ def relax(
             command line's progress line shows it.
 
     Returns:
-        The :class:`Result`: F̄, the gap and min h̄ at every accepted step, the profiles at
+        Result: F̄, the gap and min h̄ at every accepted step, the profiles at
         ``profile_times``, the estimated errors (with ``Settings.error_estimate``) and the flags.
 
     Raises:

@@ -51,19 +51,42 @@ from ._pytree import register
 
 @dataclasses.dataclass(frozen=True)
 class HalfSpace:
-    """The elastic half-space (the paper's, and the default)."""
+    """The elastic half-space (the paper's, and the default): w̄ of eq 8b."""
 
     def influence(self, mesh: Mesh) -> np.ndarray:
+        """The influence matrix Ŵ on a mesh: w̄ = -Ŵ ū at the nodes (eqs 8b, 21;
+        :func:`lubjax.stepper.influence_matrix`).
+
+        Args:
+            mesh: the :class:`lubjax.Mesh`.
+
+        Returns:
+            Ŵ, an (N, N) float64 array.
+        """
         return influence_matrix(mesh)
 
     @property
     def elastic(self):
+        """The elastic geometry: the substrate itself."""
         return self
 
     def compliance(self):
+        """The creep compliance in the stepper's form: elastic, J ≡ J₀ = 1.
+
+        Returns:
+            (J₀, J_k, λ_k) = (1.0, an empty array, an empty array).
+        """
         return _ELASTIC
 
     def step_loads(self, step):
+        """The step's elastic load: ūⁿ⁺¹ = p̄ⁿ⁺¹, no memory.
+
+        Args:
+            step: the step being taken (``lubjax._stepper.StepRecord``).
+
+        Returns:
+            StepLoads: with compliance None (c = 1).
+        """
         return _elastic_step_loads(step)
 
 
@@ -71,12 +94,20 @@ class HalfSpace:
 class Layer:
     """An elastic layer of dimensionless thickness H̄ = H/√(R d_c) on a rigid base.
 
+    In Hankel space it deflects as the half-space times a transfer function C(kH)
+    (docs/model.md, Substrates).
+
     Args:
-        thickness: H̄ > 0 (``lubjax.layer_thickness_bar(H, R, d_c)`` from SI).
-        poisson: ν ∈ (-1, 0.5] (0.5: incompressible, PDMS and gels); E* = E/(1 - ν²) as for the
-            half-space, so H̄ → ∞ is the half-space.
-        interface: how it rests on the base (``LAYER_BASES``): "bonded" (no slip) or
-            "frictionless".
+        thickness: H̄ = H/√(R d_c), dimensionless, > 0 (``lubjax.layer_thickness_bar(H, R,
+            d_c)`` from SI).
+        poisson: ν, dimensionless, in (-1, 0.5] (0.5, the default: incompressible, PDMS and
+            gels); E* = E/(1 - ν²) as for the half-space, so H̄ → ∞ is the half-space.
+        interface: how it rests on the base (``LAYER_BASES``): "bonded" (no slip, the default)
+            or "frictionless".
+
+    Raises:
+        ValueError: ``thickness`` not > 0, ``poisson`` out of range or an unknown
+            ``interface``.
     """
 
     thickness: float
@@ -91,18 +122,41 @@ class Layer:
         object.__setattr__(self, "poisson", poisson)
 
     def influence(self, mesh: Mesh) -> np.ndarray:
+        """The influence matrix Ŵ on a mesh: w̄ = -Ŵ ū at the nodes
+        (:func:`lubjax.stepper.layer_influence_matrix`).
+
+        Args:
+            mesh: the :class:`lubjax.Mesh`.
+
+        Returns:
+            Ŵ, an (N, N) float64 array.
+        """
         from ._layer import layer_influence_matrix
 
         return layer_influence_matrix(mesh, self.thickness, self.poisson, self.interface)
 
     @property
     def elastic(self):
+        """The elastic geometry: the substrate itself."""
         return self
 
     def compliance(self):
+        """The creep compliance in the stepper's form: elastic, J ≡ J₀ = 1.
+
+        Returns:
+            (J₀, J_k, λ_k) = (1.0, an empty array, an empty array).
+        """
         return _ELASTIC
 
     def step_loads(self, step):
+        """The step's elastic load: ūⁿ⁺¹ = p̄ⁿ⁺¹, no memory.
+
+        Args:
+            step: the step being taken (``lubjax._stepper.StepRecord``).
+
+        Returns:
+            StepLoads: with compliance None (c = 1).
+        """
         return _elastic_step_loads(step)
 
 
@@ -143,10 +197,15 @@ class Viscoelastic:
     :meth:`from_prony` (several). Fields (pytree leaves: differentiable and batchable):
 
     Args:
-        retardation: J_k/J∞ ≥ 0, the compliance that creeps in with time λ_k (sum < 1; the
-            instantaneous compliance is J₀ = 1 - Σ J_k).
-        times: λ_k > 0, retardation times in units of t_c.
-        elastic: HalfSpace() (default) or a Layer (static).
+        retardation: J_k, in units of the relaxed compliance 1/E*∞, each ≥ 0: the compliance
+            that creeps in with time λ_k (sum < 1; the instantaneous compliance is
+            J₀ = 1 - Σ J_k).
+        times: λ_k, retardation times (units of t_c), each > 0, as many as ``retardation``.
+        elastic: ``HalfSpace()`` (default) or a ``Layer`` (static).
+
+    Raises:
+        ValueError: ``retardation`` and ``times`` not 1-D of one length, a J_k < 0 or a sum
+            ≥ 1, a λ_k not > 0, or ``elastic`` not a HalfSpace or Layer.
     """
 
     retardation: tuple | np.ndarray | jax.Array
@@ -172,9 +231,23 @@ class Viscoelastic:
 
     @classmethod
     def standard_linear_solid(cls, stiffening, relaxation_time, elastic=None):
-        """One term: E(t) = E∞ + (E₀ - E∞) e^{-t/τ}, ``stiffening`` = E₀/E∞ > 1, τ =
-        ``relaxation_time`` (t_c units). Its compliance creeps with λ = τ E₀/E∞ from 1/E₀ to
-        1/E∞: J₁ = 1 - E∞/E₀. Differentiable in both (closed form)."""
+        """A standard linear solid: one term, E(t) = E∞ + (E₀ - E∞) e^{-t/τ}.
+
+        Its compliance creeps with λ = τ E₀/E∞ from 1/E₀ to 1/E∞: J₁ = 1 - E∞/E₀.
+        Differentiable in both numbers (closed form).
+
+        Args:
+            stiffening: E₀/E∞, dimensionless, > 1 (may be traced).
+            relaxation_time: τ, the modulus' relaxation time (units of t_c), > 0 (may be
+                traced).
+            elastic: ``HalfSpace()`` (None, the default) or a ``Layer``.
+
+        Returns:
+            Viscoelastic: the substrate.
+
+        Raises:
+            ValueError: ``stiffening`` not > 1 or ``relaxation_time`` not > 0.
+        """
         m = jnp.asarray(stiffening, jnp.float64) if is_traced(stiffening) else float(stiffening)
         tau = jnp.asarray(relaxation_time, jnp.float64) if is_traced(relaxation_time) else float(
             relaxation_time
@@ -191,10 +264,24 @@ class Viscoelastic:
 
     @classmethod
     def from_prony(cls, moduli, times, elastic=None):
-        """Relaxation modulus E(t)/E∞ = 1 + Σ_k g_k e^{-t/τ_k} (``moduli`` = g_k > 0,
-        ``times`` = τ_k > 0, t_c units) converted exactly to the compliance form: the
-        retardation rates are the roots of s Ē(s) (interlaced with the 1/τ_k), the weights its
-        residues (numpy, not traced: use :meth:`standard_linear_solid` to fit one term)."""
+        """A relaxation modulus E(t)/E∞ = 1 + Σ_k g_k e^{-t/τ_k} converted exactly to the
+        compliance form.
+
+        The retardation rates are the roots of s Ē(s) (interlaced with the 1/τ_k), the weights
+        its residues. numpy, not traced: use :meth:`standard_linear_solid` to fit one term.
+
+        Args:
+            moduli: g_k, dimensionless, each > 0.
+            times: τ_k (units of t_c), each > 0 and distinct, as many as ``moduli``.
+            elastic: ``HalfSpace()`` (None, the default) or a ``Layer``.
+
+        Returns:
+            Viscoelastic: the substrate.
+
+        Raises:
+            ValueError: ``moduli`` and ``times`` not 1-D of one length, not finite and > 0,
+                repeated times, or a conversion that yields a non-positive term.
+        """
         g = np.atleast_1d(np.asarray(moduli, np.float64))
         tau = np.atleast_1d(np.asarray(times, np.float64))
         if g.shape != tau.shape or g.ndim != 1 or g.size == 0:
@@ -229,15 +316,38 @@ class Viscoelastic:
         return cls(c, 1.0 / rates, HalfSpace() if elastic is None else elastic)
 
     def influence(self, mesh: Mesh) -> np.ndarray:
+        """The influence matrix Ŵ of the ``elastic`` geometry (w̄ = -Ŵ ū).
+
+        Args:
+            mesh: the :class:`lubjax.Mesh`.
+
+        Returns:
+            Ŵ, an (N, N) float64 array.
+        """
         return self.elastic.influence(mesh)
 
     def compliance(self):
+        """The creep compliance in the stepper's form, J(t̄) = J₀ + Σ J_k (1 - e^{-t̄/λ_k}).
+
+        Returns:
+            tuple: (J₀, J_k, λ_k), J₀ = 1 - Σ J_k and the two arrays, as JAX values.
+        """
         ret = jnp.asarray(self.retardation)
         return 1.0 - jnp.sum(ret), ret, jnp.asarray(self.times)
 
     def step_loads(self, step) -> StepLoads:
-        """(V) by the step's BDF formula: qⁿ⁺¹ = (Δt̄J_k p̄ⁿ⁺¹/λ_k - Σ_{j≥1} a_j q^{n+1-j})/(a₀ +
-        Δt̄/λ_k), so ūⁿ⁺¹ = J₀p̄ⁿ⁺¹ + Σ_k q_kⁿ⁺¹ is linear in p̄ⁿ⁺¹ (module docstring)."""
+        """The step's elastic load: (V) by the step's BDF formula.
+
+        qⁿ⁺¹ = (Δt̄J_k p̄ⁿ⁺¹/λ_k - Σ_{j≥1} a_j q^{n+1-j})/(a₀ + Δt̄/λ_k), so
+        ūⁿ⁺¹ = J₀p̄ⁿ⁺¹ + Σ_k q_kⁿ⁺¹ is linear in p̄ⁿ⁺¹ (module docstring).
+
+        Args:
+            step: the step being taken (``lubjax._stepper.StepRecord``).
+
+        Returns:
+            StepLoads: c = J₀ + Σ_k (Δt̄J_k/λ_k)/(a₀ + Δt̄/λ_k), the known part and
+            p̄ⁿ⁺¹ ↦ (qⁿ⁺¹, ūⁿ⁺¹).
+        """
         j0, jk, lam = self.compliance()
         a0, dt = step.weights[0], step.dt
         denom = a0 + dt / lam
@@ -261,7 +371,14 @@ class Viscoelastic:
         return StepLoads(j0 + jnp.sum(creep), known, loads)
 
     def compliance_at(self, t):
-        """J(t̄) E*∞ = J₀ + Σ J_k (1 - e^{-t̄/λ_k})."""
+        """The creep compliance.
+
+        Args:
+            t: t̄ (units of t_c), ≥ 0; a scalar or an array.
+
+        Returns:
+            J(t̄) E*∞ = J₀ + Σ J_k (1 - e^{-t̄/λ_k}), dimensionless, shaped as ``t``.
+        """
         j0, jk, lam = self.compliance()
         t = jnp.asarray(t)[..., None]
         return j0 + jnp.sum(jk * (1 - jnp.exp(-t / lam)), axis=-1)

@@ -33,16 +33,33 @@ from ._threads import single_threaded_blas
 
 
 class SweepResult(NamedTuple):
-    """Flattened batch: ``force[k]`` and ``film_min[k]`` belong to ``(beta[k], z0[k])``."""
+    """A flattened batch of runs (:func:`sweep`): ``force[k]`` and ``film_min[k]`` belong to
+    ``(beta[k], z0[k])``.
 
-    beta: np.ndarray  # (B,)
-    z0: np.ndarray  # (B,)
-    t: np.ndarray  # (T,) output times (shared)
-    force: np.ndarray  # (B, T), by each run's own interpolant
-    film_min: np.ndarray  # (B, T)
-    gap: np.ndarray  # (B, T) the sphere's position z̄ (free under a load, spring or free drive)
-    ok: np.ndarray  # (B,) finished, finite and positive film throughout
-    steps: np.ndarray  # (B,) accepted steps of each run
+    Attributes:
+        beta: β of each run (eq 8e), shape (B,).
+        z0: z̄0 = z0/d_c of each run (eq 8e), shape (B,).
+        t: the output times t̄ all runs share (units of t_c), shape (T,).
+        force: F̄ at ``t`` (units of F_s, eq 11b), shape (B, T), by each run's own
+            interpolant.
+        film_min: min h̄ at ``t`` (units of d_c), shape (B, T).
+        gap: z̄, the sphere's position at ``t`` (units of d_c), shape (B, T) (free under a
+            load, a spring or a free sphere).
+        ok: whether each run finished with a finite, positive film throughout, shape (B,).
+        steps: the accepted steps of each run, shape (B,).
+        compile_s: wall time of compilation [s] (0 when cached).
+        run_s: wall time of the batch's run [s].
+        devices: the number of devices the batch was spread over.
+    """
+
+    beta: np.ndarray
+    z0: np.ndarray
+    t: np.ndarray
+    force: np.ndarray
+    film_min: np.ndarray
+    gap: np.ndarray
+    ok: np.ndarray
+    steps: np.ndarray
     compile_s: float
     run_s: float
     devices: int
@@ -130,7 +147,7 @@ def sweep(
             until its slowest member is done) or "auto".
 
     Returns:
-        A :class:`SweepResult`: the flattened pairs, ``t``, ``force``, ``film_min`` and ``gap``
+        SweepResult: the flattened pairs, ``t``, ``force``, ``film_min`` and ``gap``
         of shape (pairs, times), ``ok`` and the accepted steps per pair, the compile and run
         times.
 

@@ -15,12 +15,25 @@ def _check_fields(obj, fields) -> None:
 
 
 def si_scales(E_star, radius, d_c, *, t_c=None, speed=None, viscosity=None) -> dict:
-    """The scales of eqs 7, 8e and 11b for a scene of modulus E* [Pa] and radius R [m] at the
-    depth scale d_c [m] and the time scale t_c [s] (or the speed d_c/t_c [m/s]): ``time_s``
-    (t = t_c t̄), ``length_m`` (r = √(R d_c) r̄), ``gap_m`` (d_c: h, z, w), ``pressure_Pa``
-    ((2E*/π) √(d_c/R)), ``force_N`` (F_s = 2E* d_c^{3/2} √R/π), and with a ``viscosity`` η
-    [Pa s] ``beta`` = E* d_c^{5/2}/(6π η v R^{3/2}) with v = d_c/t_c (written with the one
-    that was given, so either form rounds as written)."""
+    """The SI scales of the dimensionless variables (eqs 7, 8e and 11b) of one scene.
+
+    Args:
+        E_star: E*, plane-strain (or reduced, eq 24) modulus [Pa].
+        radius: R, sphere (or reduced, eq 24) radius [m].
+        d_c: d_c, the depth scale [m] (h, z, w are in units of d_c).
+        t_c: t_c, the time scale [s]; give exactly one of ``t_c`` and ``speed``.
+        speed: v = d_c/t_c [m/s], instead of ``t_c``.
+        viscosity: η, film viscosity [Pa s]; with it the result also holds β.
+
+    Returns:
+        dict: ``time_s`` (t = t_c t̄), ``length_m`` (r = √(R d_c) r̄), ``gap_m`` (d_c),
+        ``pressure_Pa`` ((2E*/π) √(d_c/R), eq 7), ``force_N`` (F_s = 2E* d_c^{3/2} √R/π,
+        eq 11b) and, with a ``viscosity``, ``beta`` = E* d_c^{5/2}/(6π η v R^{3/2}) (eq 8e),
+        written with whichever of ``t_c`` and ``speed`` was given, so it rounds as written.
+
+    Raises:
+        ValueError: neither or both of ``t_c`` and ``speed``.
+    """
     if (t_c is None) == (speed is None):
         raise ValueError("si_scales needs exactly one of t_c and speed")
     out = {
@@ -39,30 +52,69 @@ def si_scales(E_star, radius, d_c, *, t_c=None, speed=None, viscosity=None) -> d
 
 
 def modulus_for_beta(beta, radius, d_c, *, speed, viscosity) -> float:
-    """E* [Pa] for which a scene of radius R [m], depth scale d_c [m], speed v [m/s] and film
-    viscosity η [Pa s] has the given β: eq 8e solved for E*, E* = 6π β η v R^{3/2}/d_c^{5/2}
-    (the inverse of :func:`si_scales`' ``beta``)."""
+    """The modulus E* at which a scene has a given β: eq 8e solved for E*,
+    E* = 6π β η v R^{3/2}/d_c^{5/2} (the inverse of :func:`si_scales`' ``beta``).
+
+    Args:
+        beta: β, dimensionless (eq 8e).
+        radius: R, sphere radius [m].
+        d_c: d_c, the depth scale [m].
+        speed: v, approach speed [m/s].
+        viscosity: η, film viscosity [Pa s].
+
+    Returns:
+        E* [Pa].
+    """
     return beta * 6 * math.pi * viscosity * speed * radius**1.5 / d_c**2.5
 
 
 def spring_stiffness_bar(k, E_star, radius, d_c) -> float:
-    """K̄ = π k/(2E*√(R d_c)): a spring of stiffness k [N/m] in the units F_s/d_c of
-    :class:`lubjax.Spring` (F_s of eq 11b) for modulus E* [Pa], radius R [m] and depth scale
-    d_c [m]."""
+    """A spring's stiffness in the units F_s/d_c of :class:`lubjax.Spring` (F_s of eq 11b).
+
+    Args:
+        k: k, spring stiffness [N/m].
+        E_star: E*, plane-strain modulus [Pa].
+        radius: R, sphere radius [m].
+        d_c: d_c, the depth scale [m].
+
+    Returns:
+        K̄ = π k/(2E*√(R d_c)), dimensionless.
+    """
     return math.pi * k / (2 * E_star * math.sqrt(radius * d_c))
 
 
 def plane_strain_modulus(E: float, poisson_ratio: float) -> float:
-    """E* = E/(1 - ν²)."""
+    """The plane-strain modulus E* = E/(1 - ν²) (docs/model.md, Physics).
+
+    Args:
+        E: E, Young's modulus [Pa], > 0.
+        poisson_ratio: ν, Poisson's ratio, dimensionless, in ``POISSON_RANGE``.
+
+    Returns:
+        E* [Pa].
+
+    Raises:
+        ValueError: E not a positive finite number or ν out of range.
+    """
     E = check_quantity("E", E, "Pa")
     nu = check_poisson("poisson_ratio", poisson_ratio)
     return E / (1.0 - nu**2)
 
 
 def contact_modulus(E1: float, nu1: float, E2: float = math.inf, nu2: float = 0.0) -> float:
-    """Reduced modulus of two elastic bodies, eq 24: 1/E* = (1-ν1²)/E1 + (1-ν2²)/E2.
+    """The reduced modulus of two elastic bodies, eq 24: 1/E* = (1-ν1²)/E1 + (1-ν2²)/E2.
 
-    Leave ``E2`` at infinity for a rigid indenter.
+    Args:
+        E1: E1, Young's modulus of the substrate [Pa], > 0.
+        nu1: ν1, its Poisson's ratio, dimensionless, in ``POISSON_RANGE``.
+        E2: E2, Young's modulus of the indenter [Pa], > 0; infinity (default) for a rigid one.
+        nu2: ν2, its Poisson's ratio, in ``POISSON_RANGE`` (ignored for a rigid indenter).
+
+    Returns:
+        E* [Pa].
+
+    Raises:
+        ValueError: a modulus not positive and finite, or a Poisson's ratio out of range.
     """
     E1 = check_quantity("E1", E1, "Pa")
     nu1 = check_poisson("nu1", nu1)
@@ -74,7 +126,18 @@ def contact_modulus(E1: float, nu1: float, E2: float = math.inf, nu2: float = 0.
 
 
 def reduced_radius(R1: float, R2: float = math.inf) -> float:
-    """1/R = 1/R1 + 1/R2 (eq 24); R2 = inf for a sphere on a flat."""
+    """The reduced radius of two spheres, eq 24: 1/R = 1/R1 + 1/R2.
+
+    Args:
+        R1: R1, radius of the first sphere [m], > 0.
+        R2: R2, radius of the second [m], > 0; infinity (default) for a sphere on a flat.
+
+    Returns:
+        R [m].
+
+    Raises:
+        ValueError: a radius not positive and finite.
+    """
     R1 = check_quantity("R1", R1, "m")
     if math.isinf(R2):
         return R1
@@ -148,6 +211,19 @@ class RelaxationTest(_Scene):
 
     @classmethod
     def from_E(cls, E: float, poisson_ratio: float, **kw) -> RelaxationTest:
+        """The test on a substrate of Young's modulus E and Poisson's ratio ν.
+
+        Args:
+            E: E, Young's modulus [Pa], > 0.
+            poisson_ratio: ν, Poisson's ratio, dimensionless, in ``POISSON_RANGE``.
+            **kw: the other fields (``radius``, ``viscosity``, ``speed``, ``indent``, ``gap``).
+
+        Returns:
+            RelaxationTest: the test, with E* = E/(1 - ν²).
+
+        Raises:
+            ValueError: a value out of its range (the message names it).
+        """
         return cls(E_star=plane_strain_modulus(E, poisson_ratio), **kw)
 
     def _si_scales(self) -> dict:
@@ -166,7 +242,16 @@ class RelaxationTest(_Scene):
 
 
 def hertz_indentation(E_star: float, radius: float, load: float) -> float:
-    """δ = (3F/(4E*√R))^{2/3} [m], Hertz's indentation under the load F."""
+    """Hertz's indentation under a load (docs/model.md, Drives).
+
+    Args:
+        E_star: E*, plane-strain modulus [Pa].
+        radius: R, sphere radius [m].
+        load: F, the load [N], ≥ 0.
+
+    Returns:
+        δ = (3F/(4E*√R))^{2/3} [m].
+    """
     return (3 * load / (4 * E_star * math.sqrt(radius))) ** (2 / 3)
 
 
@@ -174,6 +259,14 @@ def hertz_indentation(E_star: float, radius: float, load: float) -> float:
 class CreepTest(_Scene):
     """A creep test in SI units: a load ramped from 0 to ``load`` in ``ramp_time``, then held,
     on a sphere that starts at rest at the gap ``gap``.
+
+    Attributes:
+        E_star: E*, plane-strain (or reduced, eq 24) modulus [Pa].
+        radius: R, sphere (or reduced, eq 24) radius [m].
+        viscosity: η, film viscosity [Pa s].
+        load: F, the held load [N].
+        ramp_time: the load's ramp time t_c [s].
+        gap: z0, the initial gap [m].
 
     Scales (docs/model.md, "Drives"): d_c = δ∞, Hertz's indentation under the load, and
     t_c = ``ramp_time``, so that the dimensionless load plateau is F̄ = 2π/3 and the gap tends to
@@ -208,10 +301,12 @@ class CreepTest(_Scene):
 
     @property
     def time_scale(self) -> float:
+        """t_c = ``ramp_time`` [s]: t = t_c t̄."""
         return self.ramp_time
 
     @property
     def z0_bar(self) -> float:
+        """z̄0 = z0/d_c, dimensionless."""
         return self.gap / self.indent
 
     @property
@@ -224,8 +319,15 @@ class CreepTest(_Scene):
                          viscosity=self.viscosity)
 
     def drive(self, history=None):
-        """The :class:`lubjax.Load` drive: the ramp-and-hold, or ``history`` (a sampled load
-        shape, in units of ``load`` against t/t_c)."""
+        """The drive :func:`lubjax.relax` takes for this test.
+
+        Args:
+            history: the load's shape in units of ``load`` against t̄ = t/t_c; None (default)
+                for the ramp-and-hold, ``RampHold()``.
+
+        Returns:
+            lubjax.Load: F̄ = ``load_bar`` × the history.
+        """
         from ._drives import Load
         from ._indenter import RampHold
 
@@ -242,6 +344,16 @@ class Collision(_Scene):
     Numbers: β = E* x0^{5/2}/(6π η V R^{3/2}); Stokes St = m V/(6π η R²); the inverse mass of
     :class:`lubjax.FreeSphere`, G = 2β/(π St); W̄ = W/F_s. Davis et al.'s elasticity parameter
     ε = 4θηVR^{3/2}/x0^{5/2} with θ = 1/(πE*) (their eq 2.6 as we read it) is 2/(3π²β).
+
+    Attributes:
+        E_star: E*, plane-strain (or reduced, eq 24) modulus [Pa].
+        radius: R, sphere (or reduced, eq 24) radius [m].
+        viscosity: η, film viscosity [Pa s].
+        mass: m, the sphere's mass [kg].
+        speed: V, its speed toward the wall at the start [m/s].
+        gap: x0, the gap at the start [m] (the depth scale d_c).
+        weight: W, a constant load toward the wall, its weight less buoyancy [N], ≥ 0
+            (default 0).
     """
 
     E_star: float
@@ -268,10 +380,12 @@ class Collision(_Scene):
 
     @property
     def time_scale(self) -> float:
+        """t_c = x0/V [s]: t = t_c t̄."""
         return self._si_scales()["time_s"]
 
     @property
     def stokes(self) -> float:
+        """The Stokes number St = m V/(6π η R²), dimensionless."""
         return self.mass * self.speed / (6 * math.pi * self.viscosity * self.radius**2)
 
     @property
@@ -284,6 +398,12 @@ class Collision(_Scene):
                          viscosity=self.viscosity)
 
     def drive(self):
+        """The drive :func:`lubjax.relax` takes for this collision.
+
+        Returns:
+            lubjax.FreeSphere: inverse mass G = 2β/(π St), starting velocity
+            v̄ = -1, load W̄ = W/F_s.
+        """
         from ._drives import FreeSphere
 
         return FreeSphere(
