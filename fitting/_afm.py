@@ -25,14 +25,18 @@ Conversion (afmformats gives SI: force N, height m, time s):
   no information on E* (the fitted z0 is the contact point, measured from the first kept row);
 * segments are decimated by block means to at most ``max_samples`` samples in all;
 * for the spring drive the stage travel, the model's input, is a least-squares cubic spline
-  per segment through the kept rows (``STAGE_INTERVALS`` knot intervals at most, each over
-  ``STAGE_MIN_ROWS`` rows at least): the height sensor's white noise (about 1 nm on JPK's
-  closed-loop height) is not stage motion. Kept as measured, it made the sampled input a line
-  through 300 kinks whose speed jumps by ±50 % from one sample to the next; before contact the
-  sphere follows such a stage through a thin film with a short lag, so every kink set off a
-  transient that the step control resolved (about 20 steps each: a film-free fit, β ~ 10⁴,
-  ran out of the 5000-step budget). The spline's rms deviation from the measured stage is in
-  the metadata (``stage_smoothing_rms_m``); the force, the data, is not smoothed.
+  per segment through the kept rows: the fewest knot intervals (4, 8, 16, ...; each over
+  ``STAGE_MIN_ROWS`` rows at least) whose rms deviation from the measured stage is within
+  ``STAGE_NOISE_FACTOR`` of the height sensor's white noise (its σ from the second
+  differences). What the spline leaves out is that noise (about 1 nm on JPK's closed-loop
+  height), not stage motion (a feedback-driven dwell, a vibration of the stage). Kept as
+  measured, the noise would make the sampled input a line through 300 kinks whose speed
+  jumps by ±50 % from one sample to the next; before contact the sphere follows such a stage
+  through a thin film with a short lag, so every kink sets off a transient that the step
+  control resolves (about 20 steps each: a film-free fit, β ~ 10⁴, runs out of the 5000-step
+  budget at its start).
+  The spline's rms deviation from the measured stage is in the metadata
+  (``stage_smoothing_rms_m``); the force, the data, is not smoothed.
 
 Tip radius: the file's (the Chiaro header's "Tip radius (um)"; afmformats reads none from JPK
 or Igor files), else ``radius=`` (``--radius``) is required. Poisson ratio: ``poisson=``.
@@ -65,10 +69,12 @@ CONTACT_FRACTION = 0.05
 #: The cut keeps this fraction of the in-contact travel before the contact estimate.
 MARGIN = 0.5
 MAX_SAMPLES = 600
-#: The stage spline (spring drive): at most this many knot intervals per segment ...
-STAGE_INTERVALS = 16
-#: ... each over at least this many rows (fewer rows: the stage is kept as measured).
-STAGE_MIN_ROWS = 20
+#: The stage spline (spring drive): each knot interval spans at least this many rows (a
+#: segment with fewer keeps its stage as measured) ...
+STAGE_MIN_ROWS = 8
+#: ... and the spline's rms deviation from the measured stage is at most this factor times
+#: the sensor's noise σ (or the knots are as dense as STAGE_MIN_ROWS allows).
+STAGE_NOISE_FACTOR = 1.2
 #: An approach-only trace is cut where the kept stage travel reaches this fraction of the
 #: model's limit MAX_TRAVEL_OVER_RADIUS·R (the cut is in the metadata: ``approach_cut_m``).
 CAP = 0.95
@@ -243,13 +249,21 @@ def _smooth_stage(t, d, lab, order):
     out = d.copy()
     for s in order:
         idx = np.flatnonzero(lab == s)
-        n_int = min(STAGE_INTERVALS, idx.size // STAGE_MIN_ROWS)
-        if n_int < 1:
+        most = idx.size // STAGE_MIN_ROWS
+        if most < 1:
             continue
-        x = t[idx]
-        knots = np.concatenate([[x[0]] * 4, np.linspace(x[0], x[-1], n_int + 1)[1:-1],
-                                [x[-1]] * 4])
-        out[idx] = make_lsq_spline(x, d[idx], knots, k=3)(x)
+        x, y = t[idx], d[idx]
+        d2 = np.diff(y, 2)
+        sigma = 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0)
+        n_int = min(4, most)
+        while True:
+            inner = np.linspace(x[0], x[-1], n_int + 1)[1:-1]
+            fit = make_lsq_spline(x, y, np.r_[[x[0]] * 4, inner, [x[-1]] * 4], k=3)(x)
+            rms = float(np.sqrt(np.mean((fit - y) ** 2)))
+            if rms <= STAGE_NOISE_FACTOR * sigma or n_int == most:
+                break
+            n_int = min(2 * n_int, most)
+        out[idx] = fit
     return out, float(np.sqrt(np.mean((out - d) ** 2)))
 
 
