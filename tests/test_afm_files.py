@@ -367,9 +367,9 @@ def test_chiaro_indentation_film_free_fit_lands_near_the_vendors_hertz(data_dir,
 
     * Without the film lubjax fits the vendor's own model, Hertz with the same R and spring,
       so its E* lands within 25 % of the vendor's E[eff] (the header's Hertz fit): they differ
-      only in the depth fitted (lubjax sees the first 0.2 R = 5.5 µm of stage travel, the
-      vendor all 13 µm, and a cell's apparent modulus changes with depth by tens of per cent)
-      and in how the contact point is found.
+      only in the depth fitted (lubjax sees the first 3.5 µm past contact, 0.2 R of stage
+      travel in all, the vendor the whole 13 µm, and a cell's apparent modulus changes with
+      depth by tens of per cent) and in how the contact point is found.
     * With the film E* may differ, and does so upward: the squeeze film carries the slow force
       rise before contact, so contact comes later and the Hertz part that has to reach the
       same peak force is shorter and steeper. The film-free fit is the η → 0 end of the film
@@ -477,7 +477,7 @@ def test_force_map_curves_fit_in_one_batched_call(data_dir):
 
     * E* of a soft sample: the stage travels 0.4–0.5 µm past contact and the lever
       (k = 0.015 N/m) bends 0.12 µm of it at the 2 nN peak, so the contact is about as stiff
-      as the lever: 2E*√(Rδ) ~ k gives E* ~ 5 kPa; allowed 300 Pa to 100 kPa.
+      as the lever: 2E*√(Rδ) ~ k at δ ≈ 0.35 µm gives E* ~ 4 kPa; allowed 300 Pa to 100 kPa.
     * The film fit's E* is above the film-free one and its χ² not above it (see the Chiaro
       test: the film takes the rise before contact; the film-free model is its η → 0 end)."""
     path = _vendor(data_dir, "fmt-jpk-fd_map2x2_extracted.jpk-force-map")
