@@ -255,10 +255,13 @@ def _smooth_stage(t, d, lab, order):
         x, y = t[idx], d[idx]
         d2 = np.diff(y, 2)
         sigma = 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0)
-        n_int = min(4, most)
+        n_int, fit = min(4, most), y
         while True:
             inner = np.linspace(x[0], x[-1], n_int + 1)[1:-1]
-            fit = make_lsq_spline(x, y, np.r_[[x[0]] * 4, inner, [x[-1]] * 4], k=3)(x)
+            try:
+                fit = make_lsq_spline(x, y, np.r_[[x[0]] * 4, inner, [x[-1]] * 4], k=3)(x)
+            except (ValueError, np.linalg.LinAlgError):
+                break  # a knot interval without rows (gaps in time): keep the coarser fit
             rms = float(np.sqrt(np.mean((fit - y) ** 2)))
             if rms <= STAGE_NOISE_FACTOR * sigma or n_int == most:
                 break
