@@ -23,7 +23,20 @@ Conversion (afmformats gives SI: force N, height m, time s):
   estimate (the first sample after which the force stays above ``CONTACT_FRACTION`` of its
   peak above the baseline): the thin-film model needs travel ≪ R, and the far approach carries
   no information on E* (the fitted z0 is the contact point, measured from the first kept row);
-* segments are decimated by block means to at most ``max_samples`` samples in all.
+* segments are decimated by block means to at most ``max_samples`` samples in all;
+* for the spring drive the stage travel, the model's input, is a least-squares cubic spline
+  per segment through the kept rows: the fewest knot intervals (4, 8, 16, ...; each over
+  ``STAGE_MIN_ROWS`` rows at least) whose rms deviation from the measured stage is within
+  ``STAGE_NOISE_FACTOR`` of the height sensor's white noise (its σ from the second
+  differences). What the spline leaves out is that noise (about 1 nm on JPK's closed-loop
+  height), not stage motion (a feedback-driven dwell, a vibration of the stage). Kept as
+  measured, the noise would make the sampled input a line through 300 kinks whose speed
+  jumps by ±50 % from one sample to the next; before contact the sphere follows such a stage
+  through a thin film with a short lag, so every kink sets off a transient that the step
+  control resolves (about 20 steps each: a film-free fit, β ~ 10⁴, runs out of the 5000-step
+  budget at its start).
+  The spline's rms deviation from the measured stage is in the metadata
+  (``stage_smoothing_rms_m``); the force, the data, is not smoothed.
 
 Tip radius: the file's (the Chiaro header's "Tip radius (um)"; afmformats reads none from JPK
 or Igor files), else ``radius=`` (``--radius``) is required. Poisson ratio: ``poisson=``.
@@ -56,6 +69,12 @@ CONTACT_FRACTION = 0.05
 #: The cut keeps this fraction of the in-contact travel before the contact estimate.
 MARGIN = 0.5
 MAX_SAMPLES = 600
+#: The stage spline (spring drive): each knot interval spans at least this many rows (a
+#: segment with fewer keeps its stage as measured) ...
+STAGE_MIN_ROWS = 8
+#: ... and the spline's rms deviation from the measured stage is at most this factor times
+#: the sensor's noise σ (or the knots are as dense as STAGE_MIN_ROWS allows).
+STAGE_NOISE_FACTOR = 1.2
 #: An approach-only trace is cut where the kept stage travel reaches this fraction of the
 #: model's limit MAX_TRAVEL_OVER_RADIUS·R (the cut is in the metadata: ``approach_cut_m``).
 CAP = 0.95
@@ -222,6 +241,35 @@ def _segment_order(a, segments, drive, name) -> list:
     return order
 
 
+def _smooth_stage(t, d, lab, order):
+    """The stage travel as a least-squares cubic spline per segment (see the module docstring),
+    and the rms of its deviation from the measured travel."""
+    from scipy.interpolate import make_lsq_spline
+
+    out = d.copy()
+    for s in order:
+        idx = np.flatnonzero(lab == s)
+        most = idx.size // STAGE_MIN_ROWS
+        if most < 1:
+            continue
+        x, y = t[idx], d[idx]
+        d2 = np.diff(y, 2)
+        sigma = 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0)
+        n_int, fit = min(4, most), y
+        while True:
+            inner = np.linspace(x[0], x[-1], n_int + 1)[1:-1]
+            try:
+                fit = make_lsq_spline(x, y, np.r_[[x[0]] * 4, inner, [x[-1]] * 4], k=3)(x)
+            except (ValueError, np.linalg.LinAlgError):
+                break  # a knot interval without rows (gaps in time): keep the coarser fit
+            rms = float(np.sqrt(np.mean((fit - y) ** 2)))
+            if rms <= STAGE_NOISE_FACTOR * sigma or n_int == most:
+                break
+            n_int = min(2 * n_int, most)
+        out[idx] = fit
+    return out, float(np.sqrt(np.mean((out - d) ** 2)))
+
+
 def _decimate(t, d, f, lab, order, max_samples):
     """Block means per segment, the segments' shares of ``max_samples`` in proportion to
     their counts."""
@@ -299,6 +347,9 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
     d_first = float(d[start])
     contact = d_contact - d_first
     t, d, f, lab = t[sel], d[sel] - d[start], f[sel], lab[sel]
+    smoothing = None
+    if drive == "spring":
+        d, smoothing = _smooth_stage(t, d, lab, order)
     t, d, f = _decimate(t, d, f, lab, order, max_samples)
     d = d - d[0]  # the first block's mean: travel since the first row kept
     reach = float(np.max(np.abs(d)))
@@ -315,6 +366,8 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
         "modality": a["modality"], "segments": ",".join(order), "baseline": baseline,
         "stage_column": a["height_column"], "contact_estimate_m": repr(contact),
     }
+    if smoothing is not None:
+        meta["stage_smoothing_rms_m"] = repr(smoothing)
     if cut is not None:
         meta["approach_cut_m"] = repr(cut - float(d_first))
     if poisson is not None:

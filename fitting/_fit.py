@@ -492,7 +492,9 @@ def _lm(evaluate: _Evaluator, x0s, n_samples, *, max_iter, tol, progress=None):
     for k, (_, _, ok) in enumerate(cur):
         if not ok:
             done[k] = True
-            msgs[k] = "the model run at the starting values failed (negative film or NaN)"
+            msgs[k] = ("the model run at the starting values failed (a negative film, NaN, or "
+                       "a run that stopped before the trace's end: the step budget ran out or "
+                       "the steps collapsed)")
 
     def s2_of(k):
         return 2 * cost[k] / max(n_samples[k] - xs[k].size, 1)
