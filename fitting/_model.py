@@ -69,15 +69,17 @@ from ._io import Trace, check_force_sign
 
 DRIVES = ("travel", "spring", "force")
 
-FIT_SETTINGS = lubjax.Settings(rtol=3e-4, force_floor=1e-5, max_steps=5000, film_error="force")
+FIT_SETTINGS = lubjax.Settings(rtol=3e-4, force_floor=1e-5, max_steps=5000)
 """The accuracy of the model inside fits: ``lubjax.Settings(rtol=3e-4, force_floor=1e-5,
-max_steps=5000, film_error="force")``. rtol = 3e-4 keeps the model's error at the true
-parameters of the bundled traces to 2e-3 of the peak (rms 1.5e-4); the force is held to rtol
-only down to 1e-5 of its peak (a load cell's noise is ≥ 1e-3 of it); a bundled trace takes
-about 300 of the 5000 attempts. A fit reads only the force, so the film's error inside a
-contact is held through the force it moves: a near-dry contact (an AFM probe on a gel, β up
-to 10⁹) costs 2-6× fewer steps than with every film held to itself. The model's remaining
-error at the optimum is estimated and folded into the reported errors."""
+max_steps=5000)``. rtol = 3e-4 keeps the model's error at the true parameters of the bundled
+traces to 2e-3 of the peak (rms 1.5e-4); the force is held to rtol only down to 1e-5 of its
+peak (a load cell's noise is ≥ 1e-3 of it); a bundled trace takes about 300 of the 5000
+attempts. The film keeps the relative control (``film_error="relative"``): with "force" a
+near-dry contact costs 2-6× fewer steps, but the model's value then moves more between
+neighbouring parameters (its steps change), and a creep fit of a real gel (the JPK
+polymer-gel dwell) stalled without meeting the Gauss-Newton test; ``lubjax-fit --film-error
+force`` chooses it where the steps matter more. The model's remaining error at the optimum is
+estimated and folded into the reported errors."""
 
 
 @dataclasses.dataclass(frozen=True)

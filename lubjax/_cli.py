@@ -181,12 +181,6 @@ def _add_relax_command(sub):
     r.add_argument(
         "--dr", type=positive_float, default=None, help="fine-zone mesh spacing (Settings.dr)"
     )
-    r.add_argument(
-        "--film-error", choices=("force", "relative"), default=None,
-        help="what the film's error is held to (Settings.film_error): relative (default: "
-        "every film to rtol of itself) or force (inside a contact, through the force it moves: "
-        "several times fewer steps near dry, beta >~ 1e5, thin films less accurate)",
-    )
     _add_accuracy(r)
     return r
 
@@ -673,8 +667,7 @@ def _relax(args) -> int:
         t_end = args.t_end / test.time_scale if test else args.t_end
     if not (math.isfinite(t_end) and t_end > 0):
         raise UsageError(f"--t-end must be > 0, got {args.t_end}")
-    given = accuracy_settings(args) | {
-        k: v for k, v in (("dr", args.dr), ("film_error", args.film_error)) if v is not None}
+    given = accuracy_settings(args) | ({"dr": args.dr} if args.dr is not None else {})
     settings = Settings(**given)
     scale = (test.radius, test.indent, test.time_scale) if test else None
     substrate, record, line = _substrate(args, settings, scale)
