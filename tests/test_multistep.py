@@ -164,8 +164,7 @@ def test_saver_shifts_entries_and_reads_profiles_by_the_steps_dense_output():
                                               film=q(time_) + 1, gap=jnp.asarray(time_ ** 2)))
     new = rest._replace(dt=jnp.asarray(t_new - t), pressure=q(t_new), film=q(t_new) + 1,
                         gap=jnp.asarray(t_new**2))
-    candidate = Candidate(new, Estimate(*(jnp.zeros(()),) * 4), jnp.asarray(2), 0.0, 0.0,
-                          jnp.zeros(n - 1))
+    candidate = Candidate(new, Estimate(*(jnp.zeros(()),) * 4), jnp.asarray(2), 0.0, 0.0)
     times = jnp.asarray([0.9, 1.1, 1.25, 1.3])
     before = Output(jnp.asarray([7, 6, 5]), jnp.full((4, n), -1.0), jnp.full(4, -1.0),
                     jnp.full((4, n), -1.0))
