@@ -376,3 +376,30 @@ def test_lm_ends_rough_costs_by_the_decrement():
                 assert "decrement at" in out.message
                 assert off > 0.25, (cell, noise, off, out.message)
     assert verdicts == {True, False}
+
+
+@pytest.mark.slow
+def test_near_dry_trace_gives_e_star_and_z0_and_leaves_the_viscosity_open():
+    """data/water_dc140.csv: PDMS under water, β = 5.4·10⁶, z̄0 = 0.5, made on a 2× finer mesh
+    at rtol 1e-6 (data/make_synthetic.py). The force is Hertz's of the indentation to ~10⁻⁴
+    (tests/test_near_dry.py) and the viscous force before contact is ~10⁻⁵ of the noise, so
+    the trace bounds η only from above: E* and z0 come out within 3σ of the truth and to < 1 %,
+    and η's standard error exceeds η itself (the report's sign that η is not determined)."""
+    tr = read_data("water_dc140")
+    res = fitting.fit_trace(tr)
+    _assert_recovers(res, tr)
+    for name in ("E_star", "z0"):
+        assert res.stderr[name] < 0.01 * res.values[name]
+    assert res.stderr["viscosity"] > res.values["viscosity"]
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "the fits' mesh (FIT_SETTINGS.mesh(), no contact-edge refinement) cannot run a near-dry "
+    "hold: at β = 5.4e6, z̄0 = 0.5 its steps stall at t̄ ≈ 1.46 with the budget spent, and the "
+    "start (z0 from Reynolds' squeeze on early force far below the noise) is at β = 2.1e7; "
+    "with Settings(contact_radius=0.7) the same fit converges"))
+def test_near_dry_fit_with_the_viscosity_fixed():
+    tr = read_data("water_dc140")
+    res = fitting.fit_trace(tr, fixed={"viscosity": 1e-3})
+    _assert_recovers(res, tr)

@@ -1,0 +1,179 @@
+r"""Near-dry contacts (β ≫ 1): the force against Hertz along the whole ramp and into the hold,
+and the film outputs accurate or flagged.
+
+At large β the film inside the contact drains to a thin dimple and the contact is nearly dry.
+The sphere then presses the substrate through that film: the substrate is indented by
+δ̄ + h̄(r̄) inside the contact, δ̄ = d̄(t̄) - z̄0 the sphere's indentation. To first order in the
+film, reciprocity with a flat punch (pressure ∝ 1/√(a² - r̄²), force per unit indentation
+dF̄_H/dδ̄ = π a, a = √δ̄ the contact radius) gives the force's excess over Hertz's
+F̄_H(δ̄) = (2π/3) δ̄^{3/2} (``lubjax.hertz_force(1 - δ̄)``):
+
+    F̄ - F̄_H(δ̄) = π a ⟨h̄⟩,   ⟨h̄⟩ = ∫₀^{π/2} h̄(a sin θ) sin θ dθ,                    (P)
+
+relative 1.5 ⟨h̄⟩/δ̄, with ⟨h̄⟩ ≤ h̄(0) (a dimple is thickest on the axis). The remainder of (P) is
+second order in h̄/δ̄ (≤ 2·10⁻³ here). While the sphere still moves (the ramp) the squeeze of the
+film adds a viscous force on top of (P). The trapped film drains like (β t̄)^{-1/2}, so h̄(0) at
+fixed t̄ falls like β^{-1/2}; the punch weight leans on the thinner film near the rim, so the
+force's excess falls faster.
+
+Run cost (this module, 2-core VM): the film_error="flux" runs take 1-2 s each at β ≤ 10⁷, the
+default ("relative") ones 2-3× that; β = 10⁹ with the error estimate ~25 s (marked slow).
+"""
+
+import numpy as np
+import pytest
+
+import lubjax
+
+Z0 = 0.5
+T_END = 2.0
+#: Profile times: the ramp where δ̄ = t̄ - z̄0 ≥ 0.1 (h̄(0)/δ̄ ≤ 2·10⁻³ at β ≥ 10⁷, ≤ 2·10⁻² at
+#: β = 10⁵), and the hold.
+RAMP = np.linspace(0.6, 1.0, 9)
+HOLD = np.array([1.05, 1.1, 1.25, 1.5, 1.75, 2.0])
+TIMES = np.concatenate([RAMP, HOLD])
+BETAS = (1e5, 1e6, 1e7)
+MODES = ("relative", "flux")
+#: Gauss-Legendre nodes for ⟨h̄⟩ (the film is piecewise linear on the mesh; 400 nodes resolve
+#: the rim's refined cells, Δr̄ = 0.001, at a ≥ 0.3).
+_X, _W = np.polynomial.legendre.leggauss(400)
+THETA, THETA_W = 0.25 * np.pi * (_X + 1.0), 0.25 * np.pi * _W
+
+
+def indentation(t):
+    return np.minimum(t, 1.0) - Z0
+
+
+def punch_film(r, film, a):
+    """⟨h̄⟩ of (P): the film inside the contact of radius ``a`` weighted by a flat punch's
+    pressure (θ = asin(r̄/a))."""
+    return np.sum(THETA_W * np.sin(THETA) * np.interp(a * np.sin(THETA), r, film))
+
+
+def hertz_terms(res):
+    """At TIMES: the force's relative excess over Hertz, F̄/F̄_H(δ̄) - 1; the film's shift
+    predicted by (P), relative to F̄_H; and 1.5 h̄(0)/δ̄."""
+    delta = indentation(TIMES)
+    hertz = lubjax.hertz_force(1.0 - delta)
+    excess = res.at(TIMES) / hertz - 1.0
+    shift = np.array([np.pi * np.sqrt(d) * punch_film(res.r, h, np.sqrt(d))
+                      for d, h in zip(delta, res.film, strict=True)]) / hertz
+    centre = 1.5 * res.at(TIMES, "film_center") / delta
+    return excess, shift, centre
+
+
+_RUNS: dict = {}
+
+
+def run(beta, mode):
+    """relax(β, 0.5, 2) at the default tolerance and mesh, without the error estimate."""
+    key = (beta, mode)
+    if key not in _RUNS:
+        _RUNS[key] = lubjax.relax(
+            beta, Z0, T_END, profile_times=TIMES,
+            settings=lubjax.Settings(film_error=mode, error_estimate=False))
+    return _RUNS[key]
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_force_is_hertz_of_the_indentation_plus_the_film_along_ramp_and_hold(mode):
+    """β = 10⁷: in the hold the force's excess over Hertz is the film's shift (P) to 2 %
+    (the remainder is second order in h̄/δ̄, ~10⁻³, plus the mesh's error in a difference of
+    10⁻⁴ F̄); on the ramp the film's squeeze adds to it, never more than the bound
+    1.5 h̄(0)/δ̄ of a film as thick as its axis everywhere."""
+    res = run(1e7, mode)
+    assert res.ok
+    excess, shift, centre = hertz_terms(res)
+    hold = TIMES > 1.0
+    np.testing.assert_array_less(np.abs(excess[hold] / shift[hold] - 1.0), 0.02)
+    ramp = ~hold
+    np.testing.assert_array_less(shift[ramp], excess[ramp])
+    np.testing.assert_array_less(excess, centre)
+    # the film is a dimple: the punch-weighted film is thinner than the axis's
+    np.testing.assert_array_less(shift, centre)
+
+
+@pytest.mark.slow
+def test_excess_over_hertz_falls_with_beta_as_the_film_drains():
+    """β ∈ {10⁵, 10⁶, 10⁷}, both film norms: the film on the axis falls like β^{-1/2} at fixed
+    t̄ (drainage, h̄ ∝ (β t̄)^{-1/2}: fitted slope within 0.05); the force's excess over Hertz
+    follows the film's shift (P) in the hold at every β, so it falls with the punch-weighted
+    film (same slope to 0.02), at least as fast as the axis's film (slope ≤ -0.5), and on the
+    ramp it falls as fast (the squeeze's share falls with β too)."""
+    log_beta = np.log10(BETAS)
+    hold = TIMES > 1.0
+    for mode in MODES:
+        terms = [hertz_terms(run(beta, mode)) for beta in BETAS]
+        excess, shift, centre = (np.array(x) for x in zip(*terms, strict=True))
+        assert np.all(excess > 0)
+        np.testing.assert_array_less(np.abs(excess[:, hold] / shift[:, hold] - 1.0), 0.02)
+        for k, t in enumerate(TIMES):
+            slope_centre = np.polyfit(log_beta, np.log10(centre[:, k]), 1)[0]
+            slope_excess = np.polyfit(log_beta, np.log10(excess[:, k]), 1)[0]
+            slope_shift = np.polyfit(log_beta, np.log10(shift[:, k]), 1)[0]
+            where = f"{mode}, t̄ = {t:g}: slopes axis film {slope_centre:.3f}, excess " \
+                    f"{slope_excess:.3f}, shift {slope_shift:.3f}"
+            assert abs(slope_centre + 0.5) < 0.05, where
+            assert slope_excess < -0.5, where
+            if hold[k]:
+                assert abs(slope_excess - slope_shift) < 0.02, where
+
+
+@pytest.fixture(scope="module")
+def finer_1e7():
+    """β = 10⁷ on a twice finer mesh (dr = 0.007): its min h̄ is within 3 % of a run 4× finer
+    (dr = 0.0035) and of the other film norm, far below the note's fraction (30 %)."""
+    return lubjax.relax(1e7, Z0, T_END, settings=lubjax.Settings(
+        dr=0.007, film_error="flux", error_estimate=False))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", MODES)
+def test_film_outputs_are_accurate_or_flagged(mode, finer_1e7):
+    """β = 10⁷, every default but the norm (the error estimate on): where
+    ``Result.unresolved_film()`` does not flag min h̄ it is within the note's fraction (30 %)
+    of the finer run; where it does, the film is really off (> 10 %). The axis's film, which
+    the force feels, is within its estimated error everywhere in contact."""
+    res = lubjax.relax(1e7, Z0, T_END, settings=lubjax.Settings(film_error=mode))
+    ref = finer_1e7
+    t = res.t[res.t > Z0]  # in contact
+    off = np.abs(res.at(t, "film_min") / ref.at(t, "film_min") - 1.0)
+    flagged = res.film_min_error > 0.3 * res.film_min
+    assert (res.unresolved_film() is not None) == bool(np.any(flagged))
+    t_flag = res.t[np.argmax(flagged)] if np.any(flagged) else np.inf
+    assert np.max(off[t < t_flag]) < 0.3
+    if np.any(flagged):
+        assert np.max(off[t >= t_flag]) > 0.1
+    centre_off = np.abs(res.at(t, "film_center") - ref.at(t, "film_center"))
+    np.testing.assert_array_less(centre_off, np.interp(t, res.t, res.film_center_error))
+
+
+@pytest.fixture(scope="module")
+def beta_1e9():
+    """β = 10⁹ (the top of the range), the flux norm (3× fewer steps than the default's), the
+    error estimate on, to t̄ = 1.2."""
+    return lubjax.relax(1e9, Z0, 1.2, settings=lubjax.Settings(film_error="flux"))
+
+
+@pytest.mark.slow
+def test_unresolved_film_is_flagged_at_beta_1e9(beta_1e9):
+    """The neck at the contact's edge (h̄_min ~ 10⁻⁶) is below what the default mesh resolves
+    from soon after contact: the note says so, from a time on the ramp after contact."""
+    res = beta_1e9
+    assert res.ok
+    note = res.unresolved_film()
+    assert note is not None
+    flagged = res.film_min_error > 0.3 * res.film_min
+    assert Z0 < res.t[np.argmax(flagged)] <= 1.0
+    # the force is Hertz's of the indentation there (the film's shift is ~10⁻⁵ of it)
+    hold = np.linspace(1.05, 1.2, 4)
+    np.testing.assert_allclose(res.at(hold), lubjax.hertz_force(Z0), rtol=1e-4)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "at β = 10⁹ the error estimate's coarse runs spend their step budget (max_steps) at "
+    "t̄ ≈ 0.8-1.0 and every estimated error after that is NaN, with Result.ok true and no note"))
+def test_error_estimate_covers_the_run_at_beta_1e9(beta_1e9):
+    res = beta_1e9
+    assert np.all(np.isfinite(res.force_error)) and np.all(np.isfinite(res.film_min_error))
