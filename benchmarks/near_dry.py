@@ -16,7 +16,7 @@ largest |F̄ - F̄_ref| over the peak, and pointwise where F̄_ref > 10⁻³ of 
 min h̄ is from the reference's. Writes benchmarks/out/near_dry.md.
 
 ``--map``: a near-dry stability map of every drive, each cell run with the default settings
-and with ``film_error="flux"`` (no error estimate: it does not change the run's steps), to
+and with ``film_error="force"`` (no error estimate: it does not change the run's steps), to
 t̄ = 2 (the ramp and as long a hold; ``--t-end``): travel, load and spring (``Travel()``,
 ``Load()``, ``Spring()`` with their default numbers) over β ∈ {10⁴, ..., 10⁹} × z̄0 ∈ {0.1,
 0.5, 1}, and the free sphere (``FreeSphere(2β/(π St), -1, 0)``, the collision's scales: z̄0 = 1
@@ -298,7 +298,7 @@ def stability_map(args, argv):
         lines = [f"# Near-dry stability map ({_harness.label()})", "",
                  f"`{_harness.command(argv)}` ({time.perf_counter() - start:.0f} s)", "",
                  f"Accepted steps (run time after compiling) of each drive to t̄ = {args.t_end:g} "
-                 f"(free sphere: {FREE_T_END:g}), default settings and film_error=\"flux\" "
+                 f"(free sphere: {FREE_T_END:g}), default settings and film_error=\"force\" "
                  f"(no error estimate); * = no tighter run (rtol {MAP_REF_RTOL:g}) to check it "
                  f"against; inaccurate: > {INACCURATE:g} of the response's range off it.", "",
                  *map_table(rows, done, list(betas))]

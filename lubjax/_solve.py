@@ -657,6 +657,16 @@ def relax(
         if check == "raise":
             raise SolverError(msg)
         warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    stopped = sorted((float(tr.t_final), int(tr.status)) for tr in trajs[1:]
+                     if int(tr.status) != DONE)
+    if stopped and result.ok and check != "flag":
+        # the run is sound, its error bars are not: NaN after the coarse runs stopped
+        warnings.warn(
+            f"relax(beta={beta}, z0={z0}): the error estimate's coarse runs stopped at "
+            f"t̄ = {stopped[0][0]:.4g} ({stop_reason(stopped[0][1], tol.max_steps).split(';')[0]}): "
+            "force_error and the other estimated errors are NaN after it; raise "
+            "Settings.max_steps, or in a near-dry contact use Settings.film_error=\"force\"",
+            RuntimeWarning, stacklevel=2)
     return result
 
 
