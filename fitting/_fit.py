@@ -227,6 +227,15 @@ def _travel_guess(t, d, f, scales: Scales, notes: list) -> dict:
         if c > 0 and z0_ls > np.max(d[sel]):
             z0, eta = float(z0_ls), float(c / (6 * math.pi * R**2))
             notes.append(f"z0, eta from Reynolds' squeeze film on {np.count_nonzero(sel)} samples")
+    loading = (t > scales.t_on) & (idx <= k_peak) & (fc > max(0.05 * f_peak, 3 * sigma))
+    dry = _hertz_loading(d, fc, v, loading, sel, R, z0, eta)
+    if dry is not None:
+        z0, E_dry = dry
+        # no squeeze film above the noise: η at the bound that sets, 3σ at a gap of 0.05 d_c
+        eta = 3 * sigma * 0.05 * dc / (6 * math.pi * R**2 * v0)
+        notes.append("z0, E* from Hertz on the loading (a near-dry contact: it fits the loading "
+                     "better than Reynolds' squeeze film); eta at the bound the noise sets")
+        return dict(E_star=E_dry, viscosity=float(eta), z0=float(z0), offset=offset)
     if z0 is None:
         z0 = dc
         eta = f_peak * 0.3 * dc / (6 * math.pi * R**2 * v0)
@@ -245,6 +254,30 @@ def _travel_guess(t, d, f, scales: Scales, notes: list) -> dict:
         E_star = lubjax.modulus_for_beta(beta, R, dc, speed=v0, viscosity=eta)
         notes.append(f"E* from the relaxation time t_R = t_c/beta (t_half = {t_half:.3g} s)")
     return dict(E_star=float(E_star), viscosity=float(eta), z0=float(z0), offset=offset)
+
+
+def _hertz_loading(d, f, v, loading, window, R, z0_squeeze, eta):
+    """(z0, E*) of Hertz's F = (4/3)E*√R (d - z0)^{3/2} (eq 14) fitted to the ``loading``
+    samples, where its z0 lies between the start and the deepest travel and it fits the
+    squeeze fit's ``window`` at least 3× better (rms) than the squeeze film F = 6πηR² v/(z0 - d)
+    with ``z0_squeeze``, ``eta`` (None: the squeeze fit failed); else None. Linear in (k, k z0)
+    for F^{2/3} = k (d - z0), k = ((4/3)E*√R)^{2/3}: the classical contact-point fit. A near-dry
+    contact (β ≳ 10⁵) pushes the squeeze film's force below the noise before contact, so the
+    loading is Hertz's and the squeeze fit's z0 is off."""
+    if np.count_nonzero(loading) < 5:
+        return None
+    A = np.stack([d[loading], -np.ones(np.count_nonzero(loading))], axis=1)
+    (k, kz0), *_ = np.linalg.lstsq(A, np.cbrt(f[loading]) ** 2, rcond=None)
+    if k <= 0 or not 0.0 < kz0 / k < np.max(d[loading]):
+        return None
+    z0 = kz0 / k
+    if z0_squeeze is not None and np.count_nonzero(window) >= 3:
+        dw, fw = d[window], f[window]
+        hertz = k**1.5 * np.clip(dw - z0, 0.0, None) ** 1.5
+        squeeze = 6 * math.pi * eta * R**2 * v[window] / (z0_squeeze - dw)
+        if np.sqrt(np.mean((hertz - fw) ** 2)) > np.sqrt(np.mean((squeeze - fw) ** 2)) / 3.0:
+            return None
+    return float(z0), float(0.75 * k**1.5 / math.sqrt(R))
 
 
 def _creep_guess(t, load, d, scales: Scales, notes: list) -> dict:
@@ -843,8 +876,9 @@ def fit_traces(
     fixed, scales, starts = _prepare(traces, spec, shared, fixed, starts)
     groups = [list(range(len(traces)))] if shared else [[t] for t in range(len(traces))]
     t0 = time.perf_counter()
-    solver = _model.make_solver(settings)
-    mesh = (_model.FIT_SETTINGS if settings is None else settings).mesh()
+    settings = _model.FIT_SETTINGS if settings is None else settings
+    mesh = fit_mesh(traces, starts, scales, spec, settings)
+    solver = _model.Solver(lubjax.stepper.discretise(mesh), settings.tolerance())
     data = _stack_traces(traces, scales, spec, mesh)
     theta0 = np.array([[_model.to_theta(n, st.values[n], sc.response_unit) for n in spec.names]
                        for st, sc in zip(starts, scales, strict=True)])
@@ -869,7 +903,7 @@ def fit_traces(
         for j, t in enumerate(members):
             r_all[t] = outcomes[k].r[j * n_pad : (j + 1) * n_pad]
     model = np.asarray(data.response) + r_all * np.asarray(data.noise)[:, None]
-    errors = _solver_error(evaluate, xs, r_all, traces, scales, spec, settings, groups) if (
+    errors = _solver_error(evaluate, xs, r_all, traces, scales, spec, settings, mesh, groups) if (
         model_error) else None
     wall = (time.perf_counter() - t0) / len(traces)
     results = []
@@ -904,7 +938,7 @@ def fit_trace(trace: Trace, **kwargs) -> FitResult:
     return fit_traces([trace], **kwargs)[0]
 
 
-def _solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, groups):
+def _solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, mesh, groups):
     """Signed error of the model response at the optimum, per problem in residual units.
 
     One extra run on the nested coarse mesh (every other node) at 8·rtol: the spatial error is
@@ -913,8 +947,7 @@ def _solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, groups):
     (y_coarse,8rtol - y)/3, the estimate ``lubjax.relax`` makes in two runs, in one. In residual
     units (r = w (y - y_data)/σ) that is (r_coarse,8rtol - r)/3; the run is the fit's own
     model (the response only: no Jacobian) on the other solver."""
-    settings = _model.FIT_SETTINGS if settings is None else settings
-    mesh = settings.mesh().coarsened()
+    mesh = mesh.coarsened()
     tol = settings.tolerance()
     loose = _model.Solver(lubjax.stepper.discretise(mesh),
                           dataclasses.replace(tol, rtol=min(8 * tol.rtol, 0.1)))
@@ -930,6 +963,44 @@ def _solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, groups):
 
 def _short_name(path):
     return os.path.splitext(os.path.basename(path))[0] or "trace"
+
+
+def fit_mesh(traces, starts, scales, spec, settings) -> lubjax.Mesh:
+    """The mesh a fit runs on: the one :func:`lubjax.mesh_for` gives a relax run of each trace
+    at its starting values (β, z̄0), refined at the contact's edge where the run ends in a
+    contact whose neck needs it (near-dry traces, β ≳ 10⁵), where every trace of the batch
+    asks for the same mesh; else ``settings.mesh()`` (the batch shares one mesh).
+
+    Args:
+        traces: the :class:`Trace` s fitted together.
+        starts: their :class:`Start` values.
+        scales: their :class:`Scales`.
+        spec: the :class:`ModelSpec`.
+        settings: the fit's ``lubjax.Settings``.
+
+    Returns:
+        lubjax.Mesh: the shared mesh.
+    """
+    meshes = []
+    for trace, start, sc in zip(traces, starts, scales, strict=True):
+        values = start.values
+        beta = float(np.exp(np.log(values["E_star"]) - np.log(values["viscosity"])
+                            + math.log(sc.indent**1.5 * sc.time_scale
+                                       / (6 * math.pi * sc.radius**1.5))))
+        z0_bar = values["z0"] / sc.indent
+        hist = _model.history(trace, sc, spec.drive)
+        if spec.drive == "force":
+            drive = lubjax.Load(sc.input_end / sc.force_scale(values["E_star"]), hist)
+        elif spec.drive == "spring":
+            drive = lubjax.Spring(lubjax.spring_stiffness_bar(
+                trace.meta_float("stiffness_N_m"), values["E_star"], sc.radius, sc.indent), hist)
+        else:
+            drive = lubjax.Travel(hist)
+        if not (np.isfinite(beta) and 1e-4 <= beta <= 1e9 and 1e-4 <= z0_bar <= 1e3):
+            return settings.mesh()
+        meshes.append(lubjax.mesh_for(settings, drive=drive, beta=beta, z0=z0_bar,
+                                      t_end=float(hist.t[-1])))
+    return meshes[0] if all(m == meshes[0] for m in meshes) else settings.mesh()
 
 
 def _stack_traces(traces, scales, spec, mesh):

@@ -120,7 +120,7 @@ class _Drive:
 
         Returns:
             The depth (units of d_c; negative: it stops short of the surface), or None where
-            the drive does not prescribe where it ends (a spring, a free sphere).
+            the drive does not tell where it ends (a free sphere).
         """
         return None
 
@@ -297,6 +297,30 @@ class Spring(_Drive):
     def __post_init__(self):
         check_number("Spring.stiffness", self.stiffness, 0.0, lo_open=True)
         _check_history(self.history, "Spring(history)")
+
+    def final_depth(self, z0):
+        """How deep the sphere ends up: where the spring, stretched by the stage's largest
+        travel, balances Hertz's force, (2π/3) δ̄^{3/2} = K̄ (max d̄ - z̄0 - δ̄) (the film
+        drained: the near-dry limit, where the contact's edge needs the mesh most).
+
+        Args:
+            z0: z̄0 = z0/d_c (eq 8e).
+
+        Returns:
+            δ̄ (units of d_c); max d̄ - z̄0 (negative) where the stage stops short of the
+            surface.
+        """
+        reach = Travel(self.history).final_depth(z0)
+        if reach <= 0.0:
+            return reach
+        lo, hi = 0.0, reach  # the balance's residual rises monotonically in δ̄
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            if (2.0 * math.pi / 3.0) * mid**1.5 > self.stiffness * (reach - mid):
+                hi = mid
+            else:
+                lo = mid
+        return 0.5 * (lo + hi)
 
     @property
     def force_nonnegative(self):

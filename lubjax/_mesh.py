@@ -216,7 +216,7 @@ def final_contact_radius(drive, z0, dr) -> float | None:
     (``drive.final_depth(z̄0)``): √(depth) for an indentation depth ≥ 0; 0 (refine the axis)
     when the sphere stops short of the surface by less than 50 dr², where the pressure spot,
     ≈ √(2 z̄) wide, would span fewer than ~10 cells; None otherwise (no contact, nothing thin
-    to resolve), and for a drive that does not know where it ends (a spring, a free sphere)."""
+    to resolve), and for a drive that does not know where it ends (a free sphere)."""
     depth = drive.final_depth(z0)
     if depth is None:
         return None

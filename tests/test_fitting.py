@@ -6,6 +6,7 @@ the fit sees the 100 Hz record at rtol 3e-4, 132 nodes), so recovery tests inclu
 discretisation error.
 """
 
+import dataclasses
 import json
 import math
 
@@ -24,7 +25,8 @@ SPEC = fitting.ModelSpec()
 
 def _z_scores(res, tr):
     return {n: (res.values[n] - float(tr.metadata[k])) / res.stderr[n]
-            for n, k in TRUE.items() if n in res.values and k in tr.metadata}
+            for n, k in TRUE.items()
+            if n in res.values and k in tr.metadata and res.stderr[n] > 0}  # (not a fixed one)
 
 
 def _assert_recovers(res, tr, z_max=3.0):
@@ -394,12 +396,13 @@ def test_near_dry_trace_gives_e_star_and_z0_and_leaves_the_viscosity_open():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "the fits' mesh (FIT_SETTINGS.mesh(), no contact-edge refinement) cannot run a near-dry "
-    "hold: at β = 5.4e6, z̄0 = 0.5 its steps stall at t̄ ≈ 1.46 with the budget spent, and the "
-    "start (z0 from Reynolds' squeeze on early force far below the noise) is at β = 2.1e7; "
-    "with Settings(contact_radius=0.7) the same fit converges"))
 def test_near_dry_fit_with_the_viscosity_fixed():
+    """The same trace with the medium's viscosity known (water): the start comes from Hertz on
+    the loading (the squeeze film is below the noise) and the fit's mesh is refined at the
+    contact's edge as relax's would be (fitting.fit_mesh); E* and z0 within 3σ of the truth."""
     tr = read_data("water_dc140")
-    res = fitting.fit_trace(tr, fixed={"viscosity": 1e-3})
+    start = fitting.initial_guess(tr, fitting.scales_from_trace(tr))
+    assert any("Hertz on the loading" in note for note in start.notes)
+    res = fitting.fit_trace(tr, fixed={"viscosity": 1e-3},
+                            settings=dataclasses.replace(fitting.FIT_SETTINGS, rtol=1e-3))
     _assert_recovers(res, tr)
