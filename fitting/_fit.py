@@ -1057,6 +1057,7 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
         )
     if not outcome.converged:
         flags.append("fit did not converge: treat the values and errors as unreliable")
+    flags += _undetermined(values, stderr, fixed)
     flags += summary["flags"]
     flags += _checks.plausibility_flags(
         {n: v for n, v in values.items() if n not in fixed}, scales.speed,
@@ -1070,6 +1071,20 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
         start=start, flags=tuple(flags), time=trace.time, data=_channel(trace, spec),
         model=model, metadata=dict(trace.metadata), fixed=tuple(fixed),
     )
+
+
+def _undetermined(values, stderr, fixed) -> list[str]:
+    """A flag for each positive parameter whose standard error exceeds it: the data bound it
+    from above only (the viscosity of a near-dry trace, whose film force is below the noise)."""
+    out = []
+    for name, value in values.items():
+        if name == "offset" or name in fixed or not value > 0 or not stderr[name] > value:
+            continue
+        hint = (" (a near-dry contact: the film's force is below the noise; fix it where the "
+                "medium is known, --fix viscosity=...)") if name == "viscosity" else ""
+        out.append(f"{name} is not determined by the data: its standard error is "
+                   f"{100 * stderr[name] / value:.0f} % of it; read it as an upper bound{hint}")
+    return out
 
 
 def _start_used(start, spec, layout, t, x0, scales, shared) -> Start:

@@ -119,6 +119,8 @@ def test_starting_values_from_physics_are_within_a_factor_two(stem):
     for name in ("E_star", "viscosity", "z0"):
         ratio = st.values[name] / float(tr.metadata[TRUE[name]])
         assert 0.5 < ratio < 2.0, (stem, name, ratio, st.notes)
+    # their loading is the squeeze film's, not Hertz's (the near-dry start is not taken)
+    assert not any("Hertz on the loading" in note for note in st.notes)
 
 
 def test_drive_from_header_and_option():
@@ -292,6 +294,7 @@ def test_cli_writes_json_report_and_plot(tmp_path, capsys):
     assert set(d["stderr"]) >= {"E_star_Pa", "viscosity_Pa_s", "z0_m"}
     assert d["converged"] is True
     assert abs(d["vs_true"]["z0_m"]["z_score"]) < 3
+    assert not any("not determined" in f for f in d["flags"])  # a tribometer trace fixes η
     assert png.stat().st_size > 10_000
     text = rep.read_text()
     for section in ("[[Fit Statistics]]", "[[Variables]]", "[[Correlations]]", "reduced chi"):
@@ -393,6 +396,9 @@ def test_near_dry_trace_gives_e_star_and_z0_and_leaves_the_viscosity_open():
     for name in ("E_star", "z0"):
         assert res.stderr[name] < 0.01 * res.values[name]
     assert res.stderr["viscosity"] > res.values["viscosity"]
+    assert [f for f in res.flags if "not determined" in f] == [
+        f for f in res.flags if f.startswith("viscosity is not determined by the data")]
+    assert any(f.startswith("viscosity is not determined") for f in res.flags)
 
 
 @pytest.mark.slow
