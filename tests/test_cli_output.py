@@ -429,6 +429,7 @@ def test_relax_json_carries_the_runs_problems_and_film_note(tmp_path):
     assert data["ok"] and data["problems"] == [] and data["unresolved_film"] is None
 
 
+@pytest.mark.slow
 def test_relax_names_the_force_norm_in_a_near_dry_contact(tmp_path, capsys):
     """β = 10⁶ indenting: relax says --film-error force exists; given it, the run says nothing
     more, takes fewer steps (the JSON's count) and keeps the force (its peak within 1e-3)."""

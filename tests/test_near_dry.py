@@ -75,7 +75,7 @@ def run(beta, mode):
     return _RUNS[key]
 
 
-@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("mode", [pytest.param("relative", marks=pytest.mark.slow), "force"])
 def test_force_is_hertz_of_the_indentation_plus_the_film_along_ramp_and_hold(mode):
     """β = 10⁷: in the hold the force's excess over Hertz is the film's shift (P) to 2 %
     (the remainder is second order in h̄/δ̄, ~10⁻³, plus the mesh's error in a difference of
