@@ -236,8 +236,9 @@ def plot_map(rows, drives, betas, path):
     handles = [Patch(color=c, label=k) for k, c in zip(MAP_CATEGORIES, MAP_COLORS, strict=True)]
     fig.legend(handles=handles, loc="lower center", ncol=len(MAP_CATEGORIES), fontsize=7,
                frameon=False)
-    fig.suptitle("Near-dry stability map, default settings (cells: accepted steps; stalled: "
-                 "the t̄ reached; inaccurate: error / range)\n" + _harness.label(), fontsize=8)
+    # (the machine and commit are in the report and the page's caption, once)
+    fig.suptitle("Near-dry stability map, default settings but the film norm (cells: accepted "
+                 "steps; stalled: the t̄ reached; inaccurate: error / range)", fontsize=8)
     fig.tight_layout(rect=(0, 0.05, 1, 0.95))
     fig.savefig(path, dpi=110)
     plt.close(fig)
