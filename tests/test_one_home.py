@@ -46,16 +46,25 @@ def test_drives_tell_the_mesh_rule_how_deep_they_end():
     # Hertz: F̄ = (2π/3) δ̄^{3/2}, so the default load's plateau 2π/3 ends at depth 1
     assert lubjax.Load().final_depth(3.0) == pytest.approx(1.0)
     assert lubjax.Load(scale=2 * math.pi / 3 * 8).final_depth(0.1) == pytest.approx(4.0)
-    assert lubjax.Spring().final_depth(0.5) is None
+    # a spring ends where it balances Hertz's force: (2π/3) δ̄^{3/2} = K̄ (max d̄ - z̄0 - δ̄)
+    for k in (0.1, 1.0, 30.0):
+        depth = lubjax.Spring(stiffness=k).final_depth(0.5)
+        assert 2 * math.pi / 3 * depth**1.5 == pytest.approx(k * (0.5 - depth), rel=1e-10)
+    assert lubjax.Spring(stiffness=1e9).final_depth(0.5) == pytest.approx(0.5, rel=1e-5)
+    assert lubjax.Spring().final_depth(2.0) == pytest.approx(-1.0)  # the stage stops short
     assert lubjax.FreeSphere().final_depth(0.5) is None
 
 
-def test_a_spring_or_free_sphere_gets_no_contact_refinement():
+def test_a_free_sphere_gets_no_contact_refinement_and_a_spring_its_balance_edge():
     settings = lubjax.Settings()
-    for drive in (lubjax.Spring(), lubjax.FreeSphere()):
-        mesh = lubjax.mesh_for(settings, drive=drive, beta=1e3, z0=0.5, t_end=1e3)
-        dr = settings.mesh_parameters()[0]
-        assert np.min(np.diff(mesh.r)) == pytest.approx(dr, rel=0.05)
+    dr = settings.mesh_parameters()[0]
+    free = lubjax.mesh_for(settings, drive=lubjax.FreeSphere(), beta=1e3, z0=0.5, t_end=1e3)
+    assert np.min(np.diff(free.r)) == pytest.approx(dr, rel=0.05)
+    spring = lubjax.mesh_for(settings, drive=lubjax.Spring(), beta=1e3, z0=0.5, t_end=1e3)
+    finest = np.argmin(np.diff(spring.r))
+    assert np.diff(spring.r)[finest] < 0.5 * dr
+    edge = math.sqrt(lubjax.Spring().final_depth(0.5))
+    assert spring.r[finest] == pytest.approx(edge, abs=0.05)
 
 
 def test_mesh_for_checks_its_arguments():
