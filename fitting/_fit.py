@@ -983,23 +983,18 @@ def fit_mesh(traces, starts, scales, spec, settings) -> lubjax.Mesh:
     """
     meshes = []
     for trace, start, sc in zip(traces, starts, scales, strict=True):
-        values = start.values
-        beta = float(np.exp(np.log(values["E_star"]) - np.log(values["viscosity"])
-                            + math.log(sc.indent**1.5 * sc.time_scale
-                                       / (6 * math.pi * sc.radius**1.5))))
-        z0_bar = values["z0"] / sc.indent
+        E_star = start.values["E_star"]
+        beta = lubjax.si_scales(E_star, sc.radius, sc.indent, t_c=sc.time_scale,
+                                viscosity=start.values["viscosity"])["beta"]
         hist = _model.history(trace, sc, spec.drive)
-        if spec.drive == "force":
-            drive = lubjax.Load(sc.input_end / sc.force_scale(values["E_star"]), hist)
-        elif spec.drive == "spring":
-            drive = lubjax.Spring(lubjax.spring_stiffness_bar(
-                trace.meta_float("stiffness_N_m"), values["E_star"], sc.radius, sc.indent), hist)
-        else:
-            drive = lubjax.Travel(hist)
-        if not (np.isfinite(beta) and 1e-4 <= beta <= 1e9 and 1e-4 <= z0_bar <= 1e3):
+        drive = _model.make_drive(spec.drive, _model.drive_unit(trace, sc, spec.drive), hist,
+                                  E_star)
+        try:
+            meshes.append(lubjax.mesh_for(settings, drive=drive, beta=beta,
+                                          z0=start.values["z0"] / sc.indent,
+                                          t_end=float(hist.t[-1])))
+        except ValueError:  # a start outside the solver's (β, z̄0) range: the shared mesh
             return settings.mesh()
-        meshes.append(lubjax.mesh_for(settings, drive=drive, beta=beta, z0=z0_bar,
-                                      t_end=float(hist.t[-1])))
     return meshes[0] if all(m == meshes[0] for m in meshes) else settings.mesh()
 
 

@@ -447,13 +447,6 @@ def trace_data(
     response = _channels(trace, spec.drive)[1]
     R, dc, tc = scales.radius, scales.indent, scales.time_scale
     fsu = scales.force_scale(1.0)
-    if spec.drive == "force":
-        drive_unit = scales.input_end / fsu
-    elif spec.drive == "spring":
-        # K̄ at E* = 1: the model divides by the fitted E*
-        drive_unit = lubjax.spring_stiffness_bar(trace.meta_float("stiffness_N_m"), 1.0, R, dc)
-    else:
-        drive_unit = 0.0
     disc = None if spec.layer is None else _layer_disc(
         FIT_SETTINGS.mesh() if mesh is None else mesh, layer_substrate(spec, scales)
     )
@@ -470,7 +463,7 @@ def trace_data(
         force_scale_unit=jnp.asarray(fsu),
         response_unit=jnp.asarray(scales.response_unit),
         noise=jnp.asarray(sigma),
-        drive_unit=jnp.asarray(drive_unit),
+        drive_unit=jnp.asarray(drive_unit(trace, scales, spec.drive)),
         disc=disc,
     )
 
@@ -490,12 +483,30 @@ def history_size(trace: Trace, scales: Scales) -> int:
     return int(np.count_nonzero(trace.time >= scales.t_on))
 
 
+def drive_unit(trace: Trace, scales: Scales, drive: str) -> float:
+    """The drive's number at E* = 1 Pa (the model divides it by the fitted E*): the load
+    F_end/``force_scale(1)`` under load control, the spring's K̄ at E* = 1 for a spring, 0 for
+    a prescribed travel."""
+    if drive == "force":
+        return scales.input_end / scales.force_scale(1.0)
+    if drive == "spring":
+        return lubjax.spring_stiffness_bar(trace.meta_float("stiffness_N_m"), 1.0,
+                                           scales.radius, scales.indent)
+    return 0.0
+
+
+def make_drive(drive: str, unit, history, E_star):
+    """The lubjax drive of a trace: ``drive`` ("travel", "spring", "force"), its
+    :func:`drive_unit`, its input ``history`` and the modulus E* [Pa]."""
+    if drive == "force":
+        return lubjax.Load(unit / E_star, history)
+    if drive == "spring":
+        return lubjax.Spring(unit / E_star, history)
+    return lubjax.Travel(history)
+
+
 def _drive(spec: ModelSpec, data: TraceData, E_star):
-    if spec.drive == "force":
-        return lubjax.Load(data.drive_unit / E_star, data.history)
-    if spec.drive == "spring":
-        return lubjax.Spring(data.drive_unit / E_star, data.history)
-    return lubjax.Travel(data.history)
+    return make_drive(spec.drive, data.drive_unit, data.history, E_star)
 
 
 def _substrate(spec: ModelSpec, u, data: TraceData):

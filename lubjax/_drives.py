@@ -310,17 +310,14 @@ class Spring(_Drive):
             δ̄ (units of d_c); max d̄ - z̄0 (negative) where the stage stops short of the
             surface.
         """
+        from scipy.optimize import brentq
+
         reach = Travel(self.history).final_depth(z0)
         if reach <= 0.0:
             return reach
-        lo, hi = 0.0, reach  # the balance's residual rises monotonically in δ̄
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            if (2.0 * math.pi / 3.0) * mid**1.5 > self.stiffness * (reach - mid):
-                hi = mid
-            else:
-                lo = mid
-        return 0.5 * (lo + hi)
+        # the balance's residual rises monotonically from -K̄ reach at 0 to > 0 at reach
+        return brentq(lambda d: (2.0 * math.pi / 3.0) * d**1.5 - self.stiffness * (reach - d),
+                      0.0, reach, xtol=1e-14 * reach, rtol=4 * np.finfo(float).eps)
 
     @property
     def force_nonnegative(self):
