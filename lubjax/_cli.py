@@ -93,9 +93,6 @@ SI_NAMES = ("E_star", "E", "poisson", "viscosity", "radius", "speed", "indent", 
 
 #: A run shorter than this shows no progress line; the line is redrawn this often.
 PROGRESS_AFTER_S = 2.0
-#: From this β on, a relax run that indents is told about --film-error force (the near-dry
-#: table of docs/accuracy.md: half the steps or fewer there, for the same force).
-NEAR_DRY_BETA = 1e5
 PROGRESS_EVERY_S = 0.5
 @contextlib.contextmanager
 def progress_line(what: str, stream=None):
@@ -687,10 +684,6 @@ def _relax(args) -> int:
             note += (f" (t̄ = t/t_c, t_c = {test.time_scale:.4g} s; h̄ = h/d_c, "
                      f"d_c = {test.indent:.4g} m)")
         print(f"note: {note}")
-    if settings.film_error == "relative" and beta >= NEAR_DRY_BETA and np.min(res.gap) < 0:
-        print(f"note: a near-dry contact (beta = {beta:.3g} >= {NEAR_DRY_BETA:g}): "
-              "--film-error force holds the force as accurately in 2-6x fewer steps (the thin "
-              "films inside the contact less accurately)")
     _write(args, out, lambda path: _plot_relax(res, path, test, line))
     return 0
 

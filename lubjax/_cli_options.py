@@ -111,10 +111,11 @@ def add_accuracy_options(parser, defaults, max_steps: bool = True) -> None:
                         help=f"time integrator (Settings.order): {orders}; 3 takes fewer steps "
                         "at a tight --rtol")
     parser.add_argument(
-        "--film-error", choices=("relative", "force"), default=None,
-        help="what the film's error is held to (Settings.film_error): relative (default: "
-        "every film to rtol of itself) or force (inside a contact, through the force it moves: "
-        "2-6x fewer steps near dry, beta >~ 1e5; thin films less accurate)")
+        "--film-error", choices=("auto", "relative", "force"), default=None,
+        help="what the film's error is held to (Settings.film_error; default "
+        f"{defaults.film_error}): auto (relative below beta = 1e5, force from there on), "
+        "relative (every film to rtol of itself) or force (inside a contact, through the force "
+        "it moves: up to 6x fewer steps near dry; thin films less accurate)")
     if max_steps:
         parser.add_argument("--max-steps", type=positive_int, default=None,
                             help="attempted-step budget (Settings.max_steps; default "

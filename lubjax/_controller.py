@@ -9,7 +9,8 @@ local error (:mod:`lubjax._multistep`); here
 * :func:`adapt` decides: accept or reject, the next Δt̄, a restart after a breakpoint, and the
   run's :class:`Status`;
 * :func:`propose` lands the next attempt on the history's next velocity jump, and
-  :func:`choose_order` picks each attempt's formula.
+  :func:`choose_order` picks each attempt's formula (backward Euler where the film collapses
+  too fast for BDF2 to stay positive: :func:`film_collapses`).
 
 Controller: the PI controller of Gustafsson (Hairer & Wanner II §IV.2; diffrax's
 ``PIDController`` with ``pcoeff = 0.4, icoeff = 0.3``), on the error ratio ε:
@@ -35,7 +36,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ._mesh import DEFAULT_RTOL
+from . import _multistep as ms
+from ._mesh import DEFAULT_RTOL, film_held_by_force
 from ._pytree import register
 
 SAFETY = 0.9
@@ -78,8 +80,8 @@ class Tolerance:
         max_steps: the attempt budget (accepted + rejected), an integer.
         force_floor: F̄ is held to rtol relative to max(|F̄|, force_floor × its peak so far)
             (dimensionless).
-        film_error: "relative" (default) or "force", what the film's error is measured
-            against (:func:`film_scale`).
+        film_error: "auto" (default), "relative" or "force", what the film's error is
+            measured against (:func:`film_scale`).
     """
 
     rtol: float = DEFAULT_RTOL
@@ -88,7 +90,7 @@ class Tolerance:
     order: int = 2
     max_steps: int = 20_000
     force_floor: float = 1e-8
-    film_error: str = "relative"
+    film_error: str = "auto"
 
 
 register(Tolerance, data=("rtol", "atol", "initial_step", "force_floor"),
@@ -123,8 +125,7 @@ _STOP_REASONS = {
     ),
     Status.RUNNING: (
         "the step budget Settings.max_steps = {max_steps} ran out; raise it "
-        "(CLI: --max-steps) or shorten t_end; in a near-dry contact (β ≳ 10⁵) "
-        "Settings.film_error=\"force\" (CLI: --film-error force) takes 2-6× fewer steps"
+        "(CLI: --max-steps) or shorten t_end"
     ),
 }
 
@@ -193,7 +194,8 @@ def propose(t, dt_next, breakpoints, t_end):
     return jnp.where(lands, target, t + dt_next), lands
 
 
-def choose_order(controller: ControllerState, force, peaks: Peaks, max_order: int):
+def choose_order(controller: ControllerState, force, peaks: Peaks, max_order: int,
+                 history=None, dt=None):
     """The attempt's formula: backward Euler for a segment's first two steps (lagged mobility,
     then linear extrapolation), BDF2 from the third, BDF3 from the fourth where ``max_order`` is
     3.
@@ -205,32 +207,71 @@ def choose_order(controller: ControllerState, force, peaks: Peaks, max_order: in
     there hardly changes). Only a force that was above the threshold and fell back: one still
     emerging from zero at the start keeps BDF2 (backward Euler there changes the early steps
     and, through them, later errors).
+
+    Given the accepted ``history`` and the attempt's ``dt``, a BDF step whose film would not
+    stay positive (:func:`film_collapses`) is backward Euler instead.
     """
     tail = (jnp.abs(force) < BACKWARD_EULER_FORCE) & (peaks.force >= BACKWARD_EULER_FORCE)
     order = jnp.where((controller.since_restart >= 2) & (max_order >= 2) & ~tail, 2, 1)
     if max_order == 3:
         order = jnp.where((controller.since_restart >= 3) & (order == 2), 3, order)
+    if history is not None:
+        order = jnp.where(film_collapses(history, dt, order, max_order), 1, order)
     return order
 
 
-def film_scale(level, previous, film_error: str):
+def film_collapses(history, dt, order, max_order: int):
+    """Whether the film at some node fell so fast that the BDF step of ``order`` (2 or 3) and
+    length ``dt`` would be negative there whatever the flux: BDF is not positivity-preserving.
+
+    Its film is h̄ⁿ⁺¹ = (-Σ_{j≥1} a_j h̄ⁿ⁺¹⁻ʲ + Δt̄ ∂h̄/∂t̄)/a₀, and the history term
+    -Σ_{j≥1} a_j h̄ⁿ⁺¹⁻ʲ extrapolates the film's fall: for BDF2 (a₁ = -(1 + ω),
+    a₂ = ω²/(1 + ω), ω = Δt̄/Δt̄ₙ; :func:`lubjax._multistep.bdf12_weights`) it is not positive
+    where h̄ⁿ⁻¹ ≥ (1 + 1/ω)² h̄ⁿ, a fourfold fall at equal steps. A film still draining
+    (∂h̄/∂t̄ < 0) then crosses zero. Backward Euler's history term is h̄ⁿ itself. This is the
+    node a near-dry contact's edge is passing (β ≳ 10⁵: the film there falls from the gap
+    outside to ~(βt̄)^{-1/2} within a few steps): there BDF2 went negative every few steps, each
+    costing a rejection and the ×0.25 shrink (β = 10⁹, z̄0 = 0.1: 1771 accepted steps to t̄ = 5,
+    1523 with this rule, on the film's mesh; benchmarks/near_dry.py). Order 1 (or a history
+    too short for the formula): False.
+    """
+    film, steps = history.film, history.dt
+    # BDF2's term multiplied by (1 + ω)/ω² > 0: no division by a first step's zero Δt̄ₙ
+    collapse = jnp.any(dt**2 * film[1] >= (dt + steps[0]) ** 2 * film[0])
+    if max_order == 3:
+        b0, b1, b2, b3 = ms.bdf3_weights(dt, steps[0], steps[1])
+        bdf3 = jnp.any(-(b1 * film[0] + b2 * film[1] + b3 * film[2]) / b0 <= 0.0)
+        collapse = jnp.where(order == 3, bdf3, collapse)
+    return (order > 1) & collapse
+
+
+def film_scale(level, previous, film_error: str, beta):
     """What the film's local error is measured against at each node (times rtol).
 
-    "relative" (the default): max(|h̄ⁿ⁺¹|, |h̄ⁿ|), the film's own size. "force" counts the
-    film's error through the force it moves: an absolute film error δ inside a contact of
-    indentation δ_c = max(-z̄, 0) shifts the elastic indentation by at most δ, and a Hertz
-    force (F ∝ δ_c^{3/2}) by 1.5 δ/δ_c of itself. So the film may err by rtol · 2δ_c/3
-    where that is more than rtol of the film: the force's own tolerance, not a nanometre film
-    at the contact's edge (near dry, β ≫ 1, h̄ ~ (βt̄)^{-1/2} ≪ δ_c, the relative control
-    spends most steps resolving the film's collapse at each node the contact edge passes).
-    Without indentation (z̄ ≥ 0, the film carries the force) it is the relative control bit
-    for bit. The thin films inside a near-dry contact are then less accurate than rtol:
-    ``Result.unresolved_film()`` flags them where the error estimate finds them off.
+    "relative": max(|h̄ⁿ⁺¹|, |h̄ⁿ|), the film's own size. "force" counts the film's error
+    through the force it moves: an absolute film error δ inside a contact of indentation
+    δ_c = max(-z̄, 0) shifts the elastic indentation by at most δ, and a Hertz force
+    (F ∝ δ_c^{3/2}) by 1.5 δ/δ_c of itself. So the film may err by rtol · 2δ_c/3 where that is
+    more than rtol of the film: the force's own tolerance, not a nanometre film at the
+    contact's edge (near dry, β ≫ 1, h̄ ~ (βt̄)^{-1/2} ≪ δ_c, the relative control spends most
+    steps resolving the film's collapse at each node the contact edge passes). Without
+    indentation (z̄ ≥ 0, the film carries the force) it is the relative control bit for bit.
+
+    "auto" (the default) is "force" from β = ``NEAR_DRY_BETA`` on and "relative" below. Below,
+    the film inside a contact is what a run reports about it (the late neck at β = 10² is held
+    to 0.5 % by the relative control and loosens 10× under "force": benchmarks/accuracy.py).
+    From there on the relative control costs 2.7-18× the steps of β = 10² (benchmarks/
+    near_dry.py) for a film that soon nobody resolves: at β = 10⁵ it still holds the thinnest
+    film to 2.3 % (0.29 under "force"), from β = 10⁶ on it is itself a third off on the
+    default mesh. The thin films inside a near-dry contact are then less accurate than
+    rtol: ``Result.unresolved_film()`` flags them where the error estimate finds them off.
+    ``beta`` may be traced (a sweep mixes the two).
     """
     relative = jnp.maximum(jnp.abs(level.film), jnp.abs(previous.film))
     if film_error == "relative":
         return relative
-    return jnp.maximum(relative, (2.0 / 3.0) * jnp.maximum(-level.gap, 0.0))
+    force = jnp.maximum(relative, (2.0 / 3.0) * jnp.maximum(-level.gap, 0.0))
+    return jnp.where(film_held_by_force(film_error, beta), force, relative)
 
 
 def error_ratio(estimate, level, previous, peaks: Peaks, tol: Tolerance, drive, gap_start,

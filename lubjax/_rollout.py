@@ -219,10 +219,11 @@ def _attempt(disc, beta, z0, drive, substrate, t_end, tol: Tolerance, profile_ti
     t, controller = state.t, state.controller
     t_new, lands = ctrl.propose(t, controller.dt_next, drive.breakpoints_array(), t_end)
     previous = jax.tree_util.tree_map(lambda x: x[0], state.history)
-    order = ctrl.choose_order(controller, previous.force, state.peaks, tol.order)
+    order = ctrl.choose_order(controller, previous.force, state.peaks, tol.order,
+                              state.history, t_new - t)
     candidate = step(disc, beta, drive, substrate, state.history, t, t_new, order, tol.order)
     gap_start = jnp.asarray(drive.initial_gap(z0), candidate.level.gap.dtype)
-    film_scale = ctrl.film_scale(candidate.level, previous, tol.film_error)
+    film_scale = ctrl.film_scale(candidate.level, previous, tol.film_error, beta)
     ratio = ctrl.error_ratio(candidate.estimate, candidate.level, previous, state.peaks, tol,
                              drive, gap_start, film_scale)
     valid = ctrl.admissible(candidate.level, state.peaks, drive)

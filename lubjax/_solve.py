@@ -70,12 +70,15 @@ class Settings:
         force_floor: the force is held to rtol relative to max(|F̄|, force_floor × its peak
             so far): pointwise down to 1e-8 of the peak by default. Raise it where a tail far
             below the peak does not matter (fits of noisy data: fitting.FIT_SETTINGS uses 1e-5).
-        film_error: what the film's local error is measured against: "relative" (default),
-            the film itself at every node; "force", inside a contact of indentation δ_c the
-            larger of the film and 2δ_c/3 (the film's error then counts through the force it
-            moves: 2-6× fewer steps in near-dry contacts, β ≳ 10⁵, the force as accurate, the
-            thin films inside the contact less so; ``Result.unresolved_film()`` says where the
-            error estimate finds them off). The fits use "force": they read only the force.
+        film_error: what the film's local error is measured against: "auto" (default),
+            "relative" below β = 10⁵ (``NEAR_DRY_BETA``) and "force" from there on;
+            "relative", the film itself at every node; "force", inside a contact of
+            indentation δ_c the larger of the film and 2δ_c/3 (the film's error then counts
+            through the force it moves). In a near-dry contact (β ≥ 10⁵) "force" takes up to
+            6× fewer steps than "relative" for the same force; the thin films inside the
+            contact, which the default mesh does not resolve there either way, are then less
+            accurate (``Result.unresolved_film()`` says where the error estimate finds them
+            off). The fits keep "relative" (``fitting.FIT_SETTINGS``).
         error_estimate: also run the nested coarse mesh (every other node) at rtol and at
             8·rtol, and return ``Result.force_error`` (about +55 % run time at the default).
         contact_radius: refine the mesh around this r̄ (units of √(R d_c); the Hertz contact's
@@ -133,7 +136,7 @@ class Settings:
         if not 1e-10 <= self.rtol <= 0.1:
             raise ValueError(f"Settings.rtol must be in [1e-10, 0.1], got {self.rtol}")
         check_choice("Settings.order", self.order, (1, 2, 3))
-        check_choice("Settings.film_error", self.film_error, ("force", "relative"))
+        check_choice("Settings.film_error", self.film_error, ("auto", "force", "relative"))
         check_int_at_least("Settings.max_steps", self.max_steps, 10)
         for name in ("dr", "length", "mesh_growth"):
             check_positive_or_none(f"Settings.{name}", getattr(self, name))
@@ -158,7 +161,8 @@ class Settings:
 
     def mesh(self, contact_radius: float | None = None,
              contact_refinement: float | None = None,
-             rim_refinement: float | None = None) -> Mesh:
+             rim_refinement: float | None = None,
+             contact_slope: float | None = None) -> Mesh:
         """The mesh of these settings, refined around a contact's edge where one is given
         (:func:`lubjax.graded_mesh`).
 
@@ -169,6 +173,9 @@ class Settings:
                 ``Settings.contact_refinement``.
             rim_refinement: refinement factor at it (dimensionless, ≥ 1); None:
                 ``Settings.rim_refinement``. :func:`relax` passes what the run needs.
+            contact_slope: inside the contact the spacing may grow to this × r̄ (in (0, 1);
+                None, the default: it stays Δr̄/contact_refinement); see
+                :func:`lubjax.graded_mesh`.
 
         Returns:
             lubjax.Mesh: the mesh.
@@ -187,6 +194,7 @@ class Settings:
             rim_dr=dr / (self.rim_refinement if rim_refinement is None else rim_refinement),
             contact_dr=dr / (self.contact_refinement if contact_refinement is None
                              else contact_refinement) if rim > 0 else None,
+            contact_slope=contact_slope if rim > 0 else None,
         )
 
     def tolerance(self) -> Tolerance:
@@ -504,8 +512,9 @@ class Result:
         """Whether the thinnest film is resolved (late necks at large β t̄ may not be).
 
         Not an error: the force can still be accurate (it is Hertz's there). Two causes: the
-        mesh may not resolve a late neck at large β t̄, and ``Settings.film_error="force"``
-        holds thin films inside a contact only through the force they move.
+        mesh may not resolve a late neck at large β t̄, and ``Settings.film_error`` "force"
+        (the default "auto" from β = 10⁵ on) holds thin films inside a contact only through
+        the force they move.
 
         Args:
             fraction: how large an estimated error of min h̄, relative to min h̄ itself, counts
@@ -523,7 +532,7 @@ class Result:
             f"from t̄ = {self.t[i]:.4g} the thinnest film (h̄_min = {self.film_min[i]:.3g}) is "
             f"not resolved (estimated error {self.film_min_error[i]:.2g}); the force can still "
             "be. If the film matters: a finer Settings.dr (CLI: --dr) resolves a thin neck, and "
-            "Settings.film_error=\"relative\" (the default; CLI: --film-error relative) holds "
+            "Settings.film_error=\"relative\" (CLI: --film-error relative) holds "
             "thin films to rtol of themselves"
         )
 
@@ -665,7 +674,7 @@ def relax(
             f"relax(beta={beta}, z0={z0}): the error estimate's coarse runs stopped at "
             f"t̄ = {stopped[0][0]:.4g} ({stop_reason(stopped[0][1], tol.max_steps).split(';')[0]}): "
             "force_error and the other estimated errors are NaN after it; raise "
-            "Settings.max_steps, or in a near-dry contact use Settings.film_error=\"force\"",
+            "Settings.max_steps",
             RuntimeWarning, stacklevel=2)
     return result
 

@@ -430,20 +430,20 @@ def test_relax_json_carries_the_runs_problems_and_film_note(tmp_path):
 
 
 @pytest.mark.slow
-def test_relax_names_the_force_norm_in_a_near_dry_contact(tmp_path, capsys):
-    """β = 10⁶ indenting: relax says --film-error force exists; given it, the run says nothing
-    more, takes fewer steps (the JSON's count) and keeps the force (its peak within 1e-3)."""
+def test_relax_holds_a_near_dry_film_through_the_force_by_default(tmp_path):
+    """β = 10⁶ indenting: the default (--film-error auto) is the force norm's run, step for
+    step (the JSON's count), fewer steps than --film-error relative, and the same force (its
+    peak within 1e-3)."""
     import json
 
     runs = {}
-    for mode in ("relative", "force"):
+    for mode in (None, "force", "relative"):
         out = tmp_path / f"{mode}.json"
+        extra = [] if mode is None else ["--film-error", mode]
         assert lcli.main(["relax", "--beta", "1e6", "--z0", "0.5", "--t-end", "1.2", "--rtol",
-                          "1e-3", "--film-error", mode, "--out", str(out)]) == 0
-        printed = capsys.readouterr().out
-        assert ("--film-error force" in printed) == (mode == "relative")
+                          "1e-3", *extra, "--out", str(out)]) == 0
         runs[mode] = json.loads(out.read_text())
-    assert runs["force"]["settings"]["film_error"] == "force"
-    assert runs["force"]["steps"] < runs["relative"]["steps"]
-    peaks = [max(runs[m]["force"]) for m in runs]
+    assert runs[None]["settings"]["film_error"] == "auto"
+    assert runs[None]["steps"] == runs["force"]["steps"] < runs["relative"]["steps"]
+    peaks = [max(runs[m]["force"]) for m in (None, "relative")]
     assert abs(peaks[0] - peaks[1]) < 1e-3 * peaks[0]

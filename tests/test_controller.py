@@ -1,12 +1,14 @@
 """The controller on its own (lubjax/_controller.py): the error norm, acceptance, the PI
 factor's limits, breakpoint landing, restarts, collapse, and the status messages."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import lubjax
 from lubjax import _controller as ctrl
+from lubjax._mesh import NEAR_DRY_BETA
 from lubjax._stepper import Estimate, Level
 
 TOL = ctrl.Tolerance(rtol=1e-4, atol=1e-9)
@@ -204,13 +206,76 @@ def test_force_film_scale_is_two_thirds_of_the_indentation_where_that_is_larger(
     film = jnp.asarray([1e-4, 0.1, 0.5])
     previous = _level(1.0, film=0.0)._replace(film=jnp.asarray([2e-4, 0.1, 0.4]))
     level = previous._replace(film=film, gap=jnp.asarray(-0.3))
-    np.testing.assert_allclose(np.asarray(ctrl.film_scale(level, previous, "force")),
+    np.testing.assert_allclose(np.asarray(ctrl.film_scale(level, previous, "force", 1.0)),
                                [0.2, 0.2, 0.5])
-    np.testing.assert_allclose(np.asarray(ctrl.film_scale(level, previous, "relative")),
+    np.testing.assert_allclose(np.asarray(ctrl.film_scale(level, previous, "relative", 1e9)),
                                [2e-4, 0.1, 0.5])
     free = level._replace(gap=jnp.asarray(0.1))
-    np.testing.assert_allclose(np.asarray(ctrl.film_scale(free, previous, "force")),
+    np.testing.assert_allclose(np.asarray(ctrl.film_scale(free, previous, "force", 1.0)),
                                [2e-4, 0.1, 0.5])
+
+
+def test_a_film_falling_faster_than_bdf_stays_positive_makes_the_step_backward_euler():
+    """BDF2's history term (1 + ω)h̄ⁿ - ω²/(1 + ω) h̄ⁿ⁻¹ is not positive where h̄ⁿ⁻¹ ≥
+    (1 + 1/ω)² h̄ⁿ: a fourfold fall at equal steps, ninefold at a step half as long; BDF3's
+    alike from its own weights. Such a step is backward Euler (as a fresh segment's are); a
+    slower fall keeps its order."""
+    from types import SimpleNamespace
+
+    def history(now, previous, older=None, dt_prev=1e-3):
+        older = previous if older is None else older
+        return SimpleNamespace(dt=jnp.full(3, dt_prev),
+                               film=jnp.asarray([[0.5, now], [0.5, previous], [0.5, older]]))
+
+    def collapses(hist, dt, order=2, max_order=2):
+        return bool(ctrl.film_collapses(hist, dt, order, max_order))
+
+    assert collapses(history(1.0e-4, 4.01e-4), 1e-3)
+    assert not collapses(history(1.0e-4, 3.99e-4), 1e-3)
+    assert not collapses(history(1.0e-4, 8.99e-4), 0.5e-3)
+    assert collapses(history(1.0e-4, 9.01e-4), 0.5e-3)
+    assert not collapses(history(1.0e-4, 9.01e-4), 0.5e-3, order=1)
+    # BDF3 at equal steps: -(a₁h̄ⁿ + a₂h̄ⁿ⁻¹ + a₃h̄ⁿ⁻²)/a₀ = (18h̄ⁿ - 9h̄ⁿ⁻¹ + 2h̄ⁿ⁻²)/11, positive
+    # for any geometric fall (18 - 9q + 2q² > 0), not after a zigzag
+    assert collapses(history(1.0e-4, 4.0e-4, 2.0e-4), 1e-3, order=3, max_order=3)
+    assert not collapses(history(1.0e-4, 4.01e-4, 16.1e-4), 1e-3, order=3, max_order=3)
+    assert collapses(history(1.0e-4, 4.01e-4, 16.1e-4), 1e-3, order=2, max_order=3)
+    young = ctrl.Peaks(jnp.asarray(1.0), jnp.asarray(0.0), jnp.asarray(0.0))
+    fast, slow = history(1.0e-4, 5e-4), history(1.0e-4, 2e-4)
+    for max_order in (2, 3):
+        assert int(ctrl.choose_order(_controller(), jnp.asarray(0.5), young, max_order, fast,
+                                     jnp.asarray(1e-3))) == 1
+        assert int(ctrl.choose_order(_controller(), jnp.asarray(0.5), young, max_order, slow,
+                                     jnp.asarray(1e-3))) == max_order
+
+
+def test_auto_film_scale_is_the_force_one_from_near_dry_beta_on():
+    """"auto": the relative scale just below β = NEAR_DRY_BETA, the force's from it on, also
+    for a traced β (a sweep over β mixes the two)."""
+    film = jnp.asarray([1e-4, 0.1, 0.5])
+    previous = _level(1.0, film=0.0)._replace(film=jnp.asarray([2e-4, 0.1, 0.4]))
+    level = previous._replace(film=film, gap=jnp.asarray(-0.3))
+    below = np.nextafter(NEAR_DRY_BETA, 0.0)
+    scales = jax.vmap(lambda b: ctrl.film_scale(level, previous, "auto", b))(
+        jnp.asarray([below, NEAR_DRY_BETA]))
+    np.testing.assert_array_equal(np.asarray(scales[0]),
+                                  np.asarray(ctrl.film_scale(level, previous, "relative", 1.0)))
+    np.testing.assert_array_equal(np.asarray(scales[1]),
+                                  np.asarray(ctrl.film_scale(level, previous, "force", 1.0)))
+
+
+def test_auto_film_error_runs_are_the_relative_ones_below_near_dry_beta_and_force_above():
+    """Whole runs that indent (z̄0 = 0.5, coarse): "auto" is "relative" bit for bit at
+    β = 10⁴ and "force" bit for bit at β = 10⁶ (and there takes fewer steps than "relative")."""
+    def run(beta, mode):
+        return lubjax.relax(beta, 0.5, 1.2, settings=lubjax.Settings(
+            rtol=1e-3, error_estimate=False, film_error=mode))
+
+    for beta, same in ((1e4, "relative"), (1e6, "force")):
+        auto, twin = run(beta, "auto"), run(beta, same)
+        assert auto.accepted == twin.accepted
+        np.testing.assert_array_equal(auto.force, twin.force)
+    assert run(1e6, "auto").accepted < run(1e6, "relative").accepted
 
 
 @pytest.mark.slow
@@ -221,7 +286,8 @@ def test_force_film_error_keeps_the_force_of_a_near_dry_contact_in_fewer_steps()
     where F̄ > 1e-3 of it), in fewer steps."""
     times = np.linspace(0.05, 1.2, 120)
     kw = dict(error_estimate=False, max_steps=100_000, dr=0.02, mesh_growth=1.15, length=100.0)
-    ref = lubjax.relax(1e6, 0.5, 1.2, settings=lubjax.Settings(rtol=1e-6, **kw)).at(times)
+    ref = lubjax.relax(1e6, 0.5, 1.2, settings=lubjax.Settings(
+        rtol=1e-6, film_error="relative", **kw)).at(times)
     peak = np.max(ref)
     runs = {mode: lubjax.relax(1e6, 0.5, 1.2, settings=lubjax.Settings(film_error=mode, **kw))
             for mode in ("relative", "force")}

@@ -5,7 +5,14 @@ import numpy as np
 import pytest
 
 import lubjax
-from lubjax._mesh import _contact_refinement, _interior_refinement, _rim_refinement
+from lubjax._mesh import (
+    DRY_CONTACT_SLOPE,
+    DRY_RIM_REFINEMENT,
+    NEAR_DRY_BETA,
+    _contact_refinement,
+    _interior_refinement,
+    _rim_refinement,
+)
 
 RAMP = lubjax.as_drive(lubjax.RampHold())
 
@@ -44,7 +51,8 @@ def test_axis_refinement_for_a_sphere_that_just_touches():
     ],
 )
 def test_auto_refinement_follows_the_contact_the_run_ends_in(beta, z0, t_end, expected):
-    rim = _contact_refinement(lubjax.Settings(), RAMP, z0, beta, t_end)
+    """(The film held relative to itself: near dry, "auto" refines for the force instead.)"""
+    rim = _contact_refinement(lubjax.Settings(film_error="relative"), RAMP, z0, beta, t_end)
     if expected is None:
         assert rim is None
     else:
@@ -93,3 +101,43 @@ def test_relax_refines_its_mesh_by_default():
     factor = _rim_refinement(lubjax.Settings(**coarse), 100.0, 1.5)  # ≈ 2.9 here
     assert factor > 2
     assert np.min(np.diff(auto.r)) == pytest.approx(0.05 / factor, rel=0.1)
+
+
+def test_a_contact_slope_keeps_a_fixed_number_of_cells_across_any_contact():
+    """Inside the contact the spacing is max(contact_dr, slope · r̄) (never above dr); outside
+    it is the plain mesh's; a slope needs an interior spacing to start from."""
+    dr, rim, slope = 0.014, 0.8, 0.028
+    mesh = lubjax.graded_mesh(dr, 1.6, 100.0, 1.05, rim=rim, rim_dr=dr, contact_dr=dr / 3,
+                              contact_slope=slope)
+    r, cells = mesh.r, np.diff(mesh.r)
+    inside = r[1:] < rim
+    np.testing.assert_array_less(cells[inside], 1.02 * np.maximum(dr / 3, slope * r[1:][inside]))
+    assert cells[r[1:] < dr / (3 * slope)].max() == pytest.approx(dr / 3, rel=0.02)
+    assert cells[(r[:-1] > 0.5) & (r[1:] < rim)].min() > 0.9 * slope * 0.5
+    assert cells[(r[:-1] > rim + 0.1) & (r[1:] <= 1.6)].max() == pytest.approx(dr, rel=0.05)
+    with pytest.raises(ValueError, match="contact_slope"):
+        lubjax.graded_mesh(dr, 1.6, 100.0, 1.05, rim=rim, rim_dr=dr, contact_slope=slope)
+
+
+@pytest.mark.parametrize("beta", [NEAR_DRY_BETA, 1e9])
+def test_near_dry_contacts_are_refined_for_the_force_not_the_film(beta):
+    """From β = NEAR_DRY_BETA on ("auto"), or with film_error="force": an indenting run's mesh is
+    the interior graded from the axis (dr/contact_refinement, then DRY_CONTACT_SLOPE · dr · r̄)
+    and the edge refined DRY_RIM_REFINEMENT times, whatever the hold (the film's neck rule
+    would refuse a hold to t̄ = 10⁶ at β = 10⁶). Below it, and with film_error="relative", the
+    film's rule."""
+    default = lubjax.Settings()
+    dr = default.mesh_parameters()[0]
+    dry = default.mesh(np.sqrt(0.5), default.contact_refinement, DRY_RIM_REFINEMENT,
+                       contact_slope=DRY_CONTACT_SLOPE * dr)
+    for settings, t_end in ((default, 5.0), (default, 1e6),
+                            (lubjax.Settings(film_error="force"), 5.0)):
+        assert lubjax.mesh_for(settings, drive=RAMP, beta=beta, z0=0.5, t_end=t_end) == dry
+    relative = lubjax.Settings(film_error="relative")
+    assert lubjax.mesh_for(relative, drive=RAMP, beta=beta, z0=0.5, t_end=5.0) != dry
+    below = np.nextafter(NEAR_DRY_BETA, 0.0)
+    assert lubjax.mesh_for(default, drive=RAMP, beta=below, z0=0.5, t_end=5.0) == \
+        lubjax.mesh_for(relative, drive=RAMP, beta=below, z0=0.5, t_end=5.0)
+    # a sphere that just touches (z̄ ≥ 0: the film carries the force) keeps the axis rule
+    assert lubjax.mesh_for(default, drive=RAMP, beta=beta, z0=1.0, t_end=5.0) == \
+        lubjax.mesh_for(relative, drive=RAMP, beta=beta, z0=1.0, t_end=5.0)

@@ -16,8 +16,13 @@ film adds a viscous force on top of (P). The trapped film drains like (β t̄)^{
 fixed t̄ falls like β^{-1/2}; the punch weight leans on the thinner film near the rim, so the
 force's excess falls faster.
 
-Run cost (this module, 2-core VM): the film_error="force" runs take 1-2 s each at β ≤ 10⁷, the
-default ("relative") ones 2-3× that; β = 10⁹ with the error estimate ~25 s (marked slow).
+Two meshes and norms: the default (film_error "auto": the force norm from β = 10⁵ on, on a mesh
+refined for the force, ``lubjax._mesh.mesh_for``) holds the force to its tolerance, so (P)'s
+10⁻⁴-10⁻³ of F̄ to a fraction of rtol; film_error="relative" holds the film to itself on the
+film's mesh, and resolves (P) to 2 % of itself.
+
+Run cost (this module, 2-core VM): the default's runs take ~1 s each at β ≤ 10⁷, the relative
+ones 2-3× that; β = 10⁹ with the error estimate ~25 s (marked slow).
 """
 
 import numpy as np
@@ -33,7 +38,9 @@ RAMP = np.linspace(0.6, 1.0, 9)
 HOLD = np.array([1.05, 1.1, 1.25, 1.5, 1.75, 2.0])
 TIMES = np.concatenate([RAMP, HOLD])
 BETAS = (1e5, 1e6, 1e7)
-MODES = ("relative", "force")
+MODES = ("relative", "auto")
+#: The default's |F̄/F̄_H - 1 - (P)| in the hold, in units of F̄_H: a third of its rtol (1e-4).
+DEFAULT_AGREEMENT = 3e-5
 #: Gauss-Legendre nodes for ⟨h̄⟩ (the film is piecewise linear on the mesh; 400 nodes resolve
 #: the rim's refined cells, Δr̄ = 0.001, at a ≥ 0.3).
 _X, _W = np.polynomial.legendre.leggauss(400)
@@ -75,38 +82,51 @@ def run(beta, mode):
     return _RUNS[key]
 
 
-@pytest.mark.parametrize("mode", [pytest.param("relative", marks=pytest.mark.slow), "force"])
+def assert_hold_is_hertz_plus_the_film(excess, shift, mode):
+    """In the hold: the film's norm resolves (P) to 2 % of itself; the default holds the force
+    to DEFAULT_AGREEMENT of Hertz's (its mesh is refined for the force: (P) came out within
+    0.4-6.6 % of itself, 2e-5 of F̄ at most)."""
+    if mode == "relative":
+        np.testing.assert_array_less(np.abs(excess / shift - 1.0), 0.02)
+    else:
+        np.testing.assert_array_less(np.abs(excess - shift), DEFAULT_AGREEMENT)
+
+
+@pytest.mark.parametrize("mode", [pytest.param("relative", marks=pytest.mark.slow), "auto"])
 def test_force_is_hertz_of_the_indentation_plus_the_film_along_ramp_and_hold(mode):
-    """β = 10⁷: in the hold the force's excess over Hertz is the film's shift (P) to 2 %
-    (the remainder is second order in h̄/δ̄, ~10⁻³, plus the mesh's error in a difference of
-    10⁻⁴ F̄); on the ramp the film's squeeze adds to it, never more than the bound
-    1.5 h̄(0)/δ̄ of a film as thick as its axis everywhere."""
+    """β = 10⁷: in the hold the force's excess over Hertz is the film's shift (P) (the
+    remainder is second order in h̄/δ̄, ~10⁻³, plus the mesh's error in a difference of 10⁻⁴ F̄:
+    ``assert_hold_is_hertz_plus_the_film``); on the ramp the film's squeeze adds to it, never
+    more than the bound 1.5 h̄(0)/δ̄ of a film as thick as its axis everywhere."""
     res = run(1e7, mode)
     assert res.ok
     excess, shift, centre = hertz_terms(res)
     hold = TIMES > 1.0
-    np.testing.assert_array_less(np.abs(excess[hold] / shift[hold] - 1.0), 0.02)
+    assert_hold_is_hertz_plus_the_film(excess[hold], shift[hold], mode)
     ramp = ~hold
-    np.testing.assert_array_less(shift[ramp], excess[ramp])
-    np.testing.assert_array_less(excess, centre)
+    slack = 0.0 if mode == "relative" else DEFAULT_AGREEMENT  # the default: to its tolerance
+    np.testing.assert_array_less(shift[ramp], excess[ramp] + slack)
+    np.testing.assert_array_less(excess, centre + slack)
     # the film is a dimple: the punch-weighted film is thinner than the axis's
     np.testing.assert_array_less(shift, centre)
 
 
 @pytest.mark.slow
 def test_excess_over_hertz_falls_with_beta_as_the_film_drains():
-    """β ∈ {10⁵, 10⁶, 10⁷}, both film norms: the film on the axis falls like β^{-1/2} at fixed
-    t̄ (drainage, h̄ ∝ (β t̄)^{-1/2}: fitted slope within 0.05); the force's excess over Hertz
-    follows the film's shift (P) in the hold at every β, so it falls with the punch-weighted
-    film (same slope to 0.02), at least as fast as the axis's film (slope ≤ -0.5), and on the
-    ramp it falls as fast (the squeeze's share falls with β too)."""
+    """β ∈ {10⁵, 10⁶, 10⁷}, both norms: the film on the axis falls like β^{-1/2} at fixed t̄
+    (drainage, h̄ ∝ (β t̄)^{-1/2}: fitted slope within 0.05); the force's excess over Hertz
+    follows the film's shift (P) in the hold at every β, so it falls at least as fast as the
+    axis's film (slope ≤ -0.5), and on the ramp as fast (the squeeze's share falls with β too).
+    Where the film is held to itself (film_error="relative", on the film's mesh) the excess
+    falls with the punch-weighted film to 0.02 in slope; the default's excess, at 10⁻⁴ of F̄ by
+    β = 10⁷, is resolved only to its force tolerance (DEFAULT_AGREEMENT)."""
     log_beta = np.log10(BETAS)
     hold = TIMES > 1.0
     for mode in MODES:
         terms = [hertz_terms(run(beta, mode)) for beta in BETAS]
         excess, shift, centre = (np.array(x) for x in zip(*terms, strict=True))
         assert np.all(excess > 0)
-        np.testing.assert_array_less(np.abs(excess[:, hold] / shift[:, hold] - 1.0), 0.02)
+        assert_hold_is_hertz_plus_the_film(excess[:, hold], shift[:, hold], mode)
         for k, t in enumerate(TIMES):
             slope_centre = np.polyfit(log_beta, np.log10(centre[:, k]), 1)[0]
             slope_excess = np.polyfit(log_beta, np.log10(excess[:, k]), 1)[0]
@@ -115,7 +135,7 @@ def test_excess_over_hertz_falls_with_beta_as_the_film_drains():
                     f"{slope_excess:.3f}, shift {slope_shift:.3f}"
             assert abs(slope_centre + 0.5) < 0.05, where
             assert slope_excess < -0.5, where
-            if hold[k]:
+            if hold[k] and mode == "relative":
                 assert abs(slope_excess - slope_shift) < 0.02, where
 
 
@@ -151,9 +171,9 @@ def test_film_outputs_are_accurate_or_flagged(mode, finer_1e7):
 
 @pytest.fixture(scope="module")
 def beta_1e9():
-    """β = 10⁹ (the top of the range), the force norm (3× fewer steps than the default's), the
-    error estimate on, to t̄ = 1.2."""
-    return lubjax.relax(1e9, Z0, 1.2, settings=lubjax.Settings(film_error="force"))
+    """β = 10⁹ (the top of the range), the default settings (the force norm there), the error
+    estimate on, to t̄ = 1.2."""
+    return lubjax.relax(1e9, Z0, 1.2)
 
 
 @pytest.mark.slow
@@ -166,16 +186,18 @@ def test_unresolved_film_is_flagged_at_beta_1e9(beta_1e9):
     assert note is not None
     flagged = res.film_min_error > 0.3 * res.film_min
     assert Z0 < res.t[np.argmax(flagged)] <= 1.0
-    # the force is Hertz's of the indentation there (the film's shift is ~10⁻⁵ of it)
+    # the force is Hertz's of the indentation there (the film's shift is ~10⁻⁵ of it), to its
+    # tolerance
     hold = np.linspace(1.05, 1.2, 4)
     np.testing.assert_allclose(res.at(hold), lubjax.hertz_force(Z0), rtol=1e-4)
 
 
 @pytest.mark.slow
 def test_error_estimate_covers_the_run_at_beta_1e9_or_says_where_it_stops(beta_1e9):
-    """With the force norm the estimate's coarse runs reach t_end at β = 10⁹; with the relative
-    one they spend their step budget on the ramp, and relax says from when its errors are NaN
-    (a warning naming the time) instead of returning them quietly."""
+    """With the default (the force norm there) the estimate's coarse runs reach t_end at
+    β = 10⁹; with the relative one they spend their step budget on the ramp, and relax says
+    from when its errors are NaN (a warning naming the time) instead of returning them
+    quietly."""
     res = beta_1e9
     assert np.all(np.isfinite(res.force_error)) and np.all(np.isfinite(res.film_min_error))
     with pytest.warns(RuntimeWarning, match=r"coarse runs stopped at t̄ = 0\.[5-8]") as caught:
@@ -184,3 +206,49 @@ def test_error_estimate_covers_the_run_at_beta_1e9_or_says_where_it_stops(beta_1
     t_stop = float(str(caught[0].message).split("t̄ = ")[1].split(" ")[0])
     assert np.all(np.isfinite(rel.force_error[rel.t < t_stop - 1e-3]))  # (t̄ printed to 4 digits)
     assert np.all(np.isnan(rel.force_error[rel.t > t_stop + 1e-3]))
+
+
+# ---------------------------------------------------------------- derivatives near dry
+#: The near-dry trace's scene (data/water_dc140.csv: β = 5.4e6, z̄0 = 0.5) at the fits' rtol.
+GRAD_BETA, GRAD_T_END, GRAD_TIMES = 5.4e6, 3.0, np.linspace(0.05, 3.0, 60)
+
+
+def _force_and_tangent(mesh, settings):
+    import jax
+
+    from lubjax.stepper import discretise, evaluate, rollout
+
+    disc, drive = discretise(mesh), lubjax.Travel()
+
+    def force(z0):
+        traj = rollout(disc, GRAD_BETA, z0, drive, GRAD_T_END, settings.tolerance())
+        return evaluate(traj.steps, GRAD_TIMES, "force")
+
+    f, tangent = jax.jvp(force, (Z0,), (1.0,))
+    step = 1e-4
+    central = (np.asarray(force(Z0 + step)) - np.asarray(force(Z0 - step))) / (2 * step)
+    return np.asarray(tangent), central
+
+
+@pytest.mark.slow
+def test_near_dry_derivative_on_the_fits_mesh_matches_central_differences():
+    """The fits' model (film_error="relative" on relax's mesh for the run, rtol 3e-4): dF̄/dz̄0
+    along the whole run agrees with central differences (step 1e-4) to 1e-3 of its largest
+    value, so Gauss-Newton sees the true sensitivities of a near-dry trace."""
+    settings = lubjax.Settings(rtol=3e-4, film_error="relative", error_estimate=False)
+    mesh = lubjax.mesh_for(settings, drive=lubjax.Travel(), beta=GRAD_BETA, z0=Z0,
+                           t_end=GRAD_T_END)
+    tangent, central = _force_and_tangent(mesh, settings)
+    assert np.max(np.abs(tangent - central)) < 1e-3 * np.max(np.abs(central))
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "known defect: near dry, where the mesh does not resolve the film inside the contact (the "
+    "shared mesh of make_plan, sweep and force_curve; or the force norm), the forward tangent "
+    "grows without bound in the hold (dF̄/dz̄0 ~ 1e214 here) while the primal run is fine"))
+def test_near_dry_derivative_on_the_shared_mesh_matches_central_differences():
+    settings = lubjax.Settings(rtol=3e-4, film_error="relative", error_estimate=False)
+    tangent, central = _force_and_tangent(settings.mesh(), settings)
+    assert np.all(np.isfinite(tangent))
+    assert np.max(np.abs(tangent - central)) < 1e-3 * np.max(np.abs(central))
