@@ -314,7 +314,8 @@ def _contact_refinement(settings, drive, z0, beta, t_end) -> float | None:
 #: max(Δr̄/contact_refinement, DRY_CONTACT_SLOPE · Δr̄ · r̄), Δr̄ at r̄ = 1/2 (:func:`mesh_for`).
 DRY_CONTACT_SLOPE = 2.0
 #: ... and its edge refined this much (at most ``Settings.rim_refinement``): the Hertz edge on
-#: plain cells left the held force 1.0e-4 off Hertz's (β = 10⁹, z̄0 = 0.5), 1.3e-5 with ×3.
+#: plain cells left the held force 1.0e-4 off Hertz's (β = 10⁹, z̄0 = 0.5; a one-off
+#: comparison), 1.3e-5 with ×3 (tests/test_near_dry.py holds it to 1e-4).
 DRY_RIM_REFINEMENT = 3.0
 
 
