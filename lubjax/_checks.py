@@ -31,6 +31,8 @@ POISSON_RANGE = (-1.0, 0.5)
 """Poisson's ratio ν ∈ (-1, 0.5] (0.5: incompressible): open below, closed above."""
 LAYER_BASES = ("bonded", "frictionless")
 """How a layer rests on its rigid base: no slip ("bonded"), or free to slide ("frictionless")."""
+FILM_ERRORS = ("auto", "relative", "force")
+"""What a film's local error may be measured against (``Settings.film_error``)."""
 
 
 def is_traced(value) -> bool:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from ._checks import LAYER_BASES, POISSON_RANGE, check_poisson
+from ._checks import FILM_ERRORS, LAYER_BASES, POISSON_RANGE, check_poisson
 from ._files import UsageError
 
 #: Poisson's range as the help and messages write it.
@@ -111,11 +111,11 @@ def add_accuracy_options(parser, defaults, max_steps: bool = True) -> None:
                         help=f"time integrator (Settings.order): {orders}; 3 takes fewer steps "
                         "at a tight --rtol")
     parser.add_argument(
-        "--film-error", choices=("auto", "relative", "force"), default=None,
+        "--film-error", choices=FILM_ERRORS, default=None,
         help="what the film's error is held to (Settings.film_error; default "
         f"{defaults.film_error}): auto (relative below beta = 1e5, force from there on), "
         "relative (every film to rtol of itself) or force (inside a contact, through the force "
-        "it moves: up to 6x fewer steps near dry; thin films less accurate)")
+        "it moves: 2-8x fewer steps near dry; thin films less accurate)")
     if max_steps:
         parser.add_argument("--max-steps", type=positive_int, default=None,
                             help="attempted-step budget (Settings.max_steps; default "

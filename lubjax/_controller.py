@@ -260,7 +260,7 @@ def film_scale(level, previous, film_error: str, beta):
     "auto" (the default) is "force" from β = ``NEAR_DRY_BETA`` on and "relative" below. Below,
     the film inside a contact is what a run reports about it (the late neck at β = 10² is held
     to 0.5 % by the relative control and loosens 10× under "force": benchmarks/accuracy.py).
-    From there on the relative control costs 2.7-18× the steps of β = 10² (benchmarks/
+    From there on the relative control costs 2.7-19× the steps of β = 10² (benchmarks/
     near_dry.py) for a film that soon nobody resolves: at β = 10⁵ it still holds the thinnest
     film to 2.3 % (0.29 under "force"), from β = 10⁶ on it is itself a third off on the
     default mesh. The thin films inside a near-dry contact are then less accurate than

@@ -296,18 +296,28 @@ def _rim_refinement(settings, beta, t_end) -> float:
     return min(settings.rim_refinement, max(1.0, dr * cells / neck))
 
 
-def _contact_refinement(settings, drive, z0, beta, t_end) -> float | None:
-    """The radius ``Settings.contact_radius="auto"`` refines around for one run, or None."""
+def _contact_edge(settings, drive, z0) -> float | None:
+    """The edge of the contact a run ends in, where its mesh may be refined: the numeric
+    ``Settings.contact_radius``, or with "auto" :func:`final_contact_radius` of the drive
+    (None without a contact, or at the fine zone's end: there nothing can be refined, the zone
+    must be widened instead); None for ``contact_radius=None``."""
     if settings.contact_radius != "auto":
-        return None
+        return settings.contact_radius
     dr = settings.mesh_parameters()[0]
     rim = final_contact_radius(drive, float(z0), dr)
-    # (outside the fine zone there is nothing to refine: the zone must be widened instead)
-    if rim is None or rim >= 0.95 * settings.r_fine:
+    return None if rim is None or rim >= 0.95 * settings.r_fine else rim
+
+
+def _contact_refinement(settings, drive, z0, beta, t_end) -> float | None:
+    """The radius ``Settings.contact_radius="auto"`` refines around for one run's film, or
+    None (not "auto", no contact, or a neck no refined cell resolves)."""
+    if settings.contact_radius != "auto":
         return None
-    if rim > 0 and film_held_by_force(settings.film_error, beta):
-        return rim
-    return rim if _neck_resolvable(float(beta), t_end, dr / settings.rim_refinement) else None
+    rim = _contact_edge(settings, drive, z0)
+    dr = settings.mesh_parameters()[0]
+    if rim is None or not _neck_resolvable(float(beta), t_end, dr / settings.rim_refinement):
+        return None
+    return rim
 
 
 #: The near-dry contact's interior spacing, in units of Δr̄ per unit r̄: at most
@@ -368,8 +378,7 @@ def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
     check_parameters(beta, z0)
     check_number("t_end", t_end, 0.0, T_END_MAX, lo_open=True)
     beta, t_end = float(beta), float(t_end)
-    auto_rim = _contact_refinement(settings, drive, z0, beta, t_end)
-    rim = auto_rim if isinstance(settings.contact_radius, str) else settings.contact_radius
+    rim = _contact_edge(settings, drive, z0)
     if rim is not None and rim > 0 and film_held_by_force(settings.film_error, beta):
         # Near dry the film inside the contact is held only through the force, so the mesh is
         # refined for the force of a contact growing from the axis, not for the film's neck and
@@ -379,5 +388,6 @@ def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
         return settings.mesh(rim, settings.contact_refinement,
                              min(DRY_RIM_REFINEMENT, settings.rim_refinement),
                              contact_slope=DRY_CONTACT_SLOPE * dr)
-    return settings.mesh(auto_rim, _interior_refinement(settings, beta, t_end),
+    return settings.mesh(_contact_refinement(settings, drive, z0, beta, t_end),
+                         _interior_refinement(settings, beta, t_end),
                          _rim_refinement(settings, beta, t_end))

@@ -13,6 +13,7 @@ import numpy as np
 
 from . import _compiler
 from ._checks import (
+    FILM_ERRORS,
     check_auto_none_or_below,
     check_choice,
     check_int_at_least,
@@ -74,11 +75,11 @@ class Settings:
             "relative" below β = 10⁵ (``NEAR_DRY_BETA``) and "force" from there on;
             "relative", the film itself at every node; "force", inside a contact of
             indentation δ_c the larger of the film and 2δ_c/3 (the film's error then counts
-            through the force it moves). In a near-dry contact (β ≥ 10⁵) "force" takes up to
-            6× fewer steps than "relative" for the same force; the thin films inside the
-            contact, which the default mesh does not resolve there either way, are then less
-            accurate (``Result.unresolved_film()`` says where the error estimate finds them
-            off). The fits keep "relative" (``fitting.FIT_SETTINGS``).
+            through the force it moves). In a near-dry contact (β ≥ 10⁵) the default takes
+            2-8× fewer steps than "relative" for the same force (docs/accuracy.md); the thin
+            films inside the contact (which from β = 10⁶ on the default mesh does not resolve
+            either way) are then less accurate (``Result.unresolved_film()`` says where the error
+            estimate finds them off). The fits keep "relative" (``fitting.FIT_SETTINGS``).
         error_estimate: also run the nested coarse mesh (every other node) at rtol and at
             8·rtol, and return ``Result.force_error`` (about +55 % run time at the default).
         contact_radius: refine the mesh around this r̄ (units of √(R d_c); the Hertz contact's
@@ -136,7 +137,7 @@ class Settings:
         if not 1e-10 <= self.rtol <= 0.1:
             raise ValueError(f"Settings.rtol must be in [1e-10, 0.1], got {self.rtol}")
         check_choice("Settings.order", self.order, (1, 2, 3))
-        check_choice("Settings.film_error", self.film_error, ("auto", "force", "relative"))
+        check_choice("Settings.film_error", self.film_error, FILM_ERRORS)
         check_int_at_least("Settings.max_steps", self.max_steps, 10)
         for name in ("dr", "length", "mesh_growth"):
             check_positive_or_none(f"Settings.{name}", getattr(self, name))

@@ -51,8 +51,7 @@ def test_axis_refinement_for_a_sphere_that_just_touches():
     ],
 )
 def test_auto_refinement_follows_the_contact_the_run_ends_in(beta, z0, t_end, expected):
-    """(The film held relative to itself: near dry, "auto" refines for the force instead.)"""
-    rim = _contact_refinement(lubjax.Settings(film_error="relative"), RAMP, z0, beta, t_end)
+    rim = _contact_refinement(lubjax.Settings(), RAMP, z0, beta, t_end)
     if expected is None:
         assert rim is None
     else:
