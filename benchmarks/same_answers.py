@@ -94,9 +94,15 @@ def _scenes(quick: bool):
         for substrate in (lj.HalfSpace(), visco(lj)):
             for order in (2, 3):
                 tol = toolkit.Tolerance(order=order)
-                shape = jax.eval_shape(
-                    lambda s, t: loop._initial_state(disc, 100.0, lj.Travel(), s, 0.5, t,
-                                                     jnp.zeros((0,))), substrate, tol)
+                if hasattr(loop, "Inputs"):  # the loop's inputs in one record
+                    def initial(s, t):
+                        return loop._initial_state(loop.Inputs(
+                            disc, 100.0, 0.5, lj.Travel(), s, 1.0, t, jnp.zeros((0,))))
+                else:
+                    def initial(s, t):
+                        return loop._initial_state(disc, 100.0, lj.Travel(), s, 0.5, t,
+                                                   jnp.zeros((0,)))
+                shape = jax.eval_shape(initial, substrate, tol)
                 out.append(sum(x.size * x.dtype.itemsize for x in jax.tree_util.tree_leaves(
                     shape)))
         return {"state_bytes": np.array(out)}

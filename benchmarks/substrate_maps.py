@@ -43,12 +43,12 @@ def viscoelastic_map(quick):
     taus = np.geomspace(0.01, 100.0, 7 if quick else 13)
     ratios = np.array([1.02, 1.1, 1.5, 3.0] if quick else [1.01, 1.03, 1.1, 1.3, 2.0, 3.0, 5.0])
     plan = lubjax.make_plan(5.0, settings=SETTINGS, times=TIMES)
-    elastic = np.asarray(lubjax.force_curve(plan, beta, z0, mode="forward"))
+    elastic = np.asarray(lubjax.force_curve(plan, beta, z0))
 
     def one(m, tau):
         solid = lubjax.Viscoelastic.standard_linear_solid(m, tau)
         traj = lubjax.stepper.rollout(plan.disc, beta, z0, plan.drive, plan.t_end, plan.tol,
-                              substrate=solid, mode="forward")  # fmt: skip
+                              substrate=solid)  # fmt: skip
         return lubjax.stepper.evaluate(traj.steps, plan.t, "force"), traj.finished
 
     M, T = np.meshgrid(ratios, taus, indexing="ij")
@@ -59,7 +59,7 @@ def viscoelastic_map(quick):
     assert np.all(np.asarray(finished))
     instant = {}
     for m in ratios:  # the elastic solver at E*₀: F̄ = m F̄(mβ)
-        instant[m] = m * np.asarray(lubjax.force_curve(plan, m * beta, z0, mode="forward"))
+        instant[m] = m * np.asarray(lubjax.force_curve(plan, m * beta, z0))
     peak = np.max(force, axis=-1)
     err_relaxed = np.max(np.abs(force - elastic), axis=-1) / peak
     err_instant = np.stack([

@@ -658,7 +658,7 @@ def _lbfgs(evaluate, x0s, n_samples, *, max_iter, tol, progress=None):
         def loss(x, datas=datas, base=base, Ms=Ms):
             total = 0.0
             for d, b, m in zip(datas, base, Ms):
-                y, film = _model.predict(b + m @ x, d, solver, spec, mode="reverse")
+                y, film = _model.predict(b + m @ x, d, solver, spec)
                 r = d.weight * (y - d.response) / d.noise
                 total = total + jnp.where(film > 0, 0.5 * jnp.sum(r**2), jnp.inf)
             return total

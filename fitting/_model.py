@@ -541,18 +541,17 @@ def solver_inputs(theta, data: TraceData, spec: ModelSpec):
     return jnp.stack(parts)
 
 
-def _stepper_output(u, data: TraceData, solver: Solver, spec: ModelSpec, mode: str = "forward"):
+def _stepper_output(u, data: TraceData, solver: Solver, spec: ModelSpec):
     """The stepper's channel at the samples (F̄, or the gap z̄ under load control) and the
     thinnest film min h̄ over the run (must stay > 0; -inf when the run did not reach its last
-    sample), from ``u`` (:func:`solver_inputs`). ``mode``: the rollout's (``"forward"``:
-    while_loop, jvp; ``"reverse"``: checkpointed scan, also ``jax.grad``)."""
+    sample), from ``u`` (:func:`solver_inputs`)."""
     beta = jnp.exp(u[0])
     z0_bar = jnp.exp(u[1]) / data.indent
     E_star = jnp.exp(u[2]) if spec.drive != "travel" else None
     disc = solver.disc if data.disc is None else data.disc
     traj = lubjax.stepper.rollout(
         disc, beta, z0_bar, _drive(spec, data, E_star), data.t_end, solver.tol,
-        substrate=_substrate(spec, u, data), mode=mode,
+        substrate=_substrate(spec, u, data),
     )
     channel = "force" if spec.response == "force" else "gap"
     y = lubjax.stepper.evaluate(traj.steps, data.t_data, channel)
@@ -570,7 +569,7 @@ def _response(theta, channel, data: TraceData, spec: ModelSpec):
     return y + theta[-1] * data.response_unit
 
 
-def predict(theta, data: TraceData, solver: Solver, spec: ModelSpec, mode: str = "forward"):
+def predict(theta, data: TraceData, solver: Solver, spec: ModelSpec):
     """The model's response at the samples: y_k = F_s F̄(t̄_k) + b for a force response (eq 11b),
     y_k = d_c (z̄0 - z̄(t̄_k)) + b for a displacement response (``fitting._model``).
 
@@ -580,14 +579,12 @@ def predict(theta, data: TraceData, solver: Solver, spec: ModelSpec, mode: str =
         data: the trace's :class:`TraceData`.
         solver: the :class:`Solver`.
         spec: the :class:`ModelSpec`.
-        mode: the rollout's: "forward" (default; ``while_loop``, jvp) or "reverse"
-            (checkpointed scan, also ``jax.grad``).
 
     Returns:
         (y, h̄_min): the response at the samples [N or m], and the thinnest film over the run
         (units of d_c; must stay > 0; -inf when the run did not reach its last sample).
     """
-    channel, film = _stepper_output(solver_inputs(theta, data, spec), data, solver, spec, mode)
+    channel, film = _stepper_output(solver_inputs(theta, data, spec), data, solver, spec)
     return _response(theta, channel, data, spec), film
 
 

@@ -299,7 +299,7 @@ def make_plan(
     )
 
 
-def force_curve(plan: Plan, beta, z0, times=None, *, mode: str = "reverse"):
+def force_curve(plan: Plan, beta, z0, times=None):
     """F̄ at ``times`` (default ``plan.t``): a pure function of (β, z̄0) for ``jit``, ``vmap``,
     ``jax.grad``, ``jacfwd`` and ``jacrev``.
 
@@ -308,11 +308,6 @@ def force_curve(plan: Plan, beta, z0, times=None, *, mode: str = "reverse"):
         beta: β (eq 8e), in [1e-4, 1e9]; a traced scalar.
         z0: z̄0 = z0/d_c, in [1e-4, 1e3]; a traced scalar.
         times: where to report F̄ (t̄, units of t_c; default ``plan.t``).
-        mode: "reverse" (default) runs a checkpointed ``lax.scan`` over the plan's attempt
-            budget (``Settings.max_steps``), so reverse-mode AD works; finished attempts are
-            skipped with ``lax.cond``, but under ``vmap`` every batch member pays the whole
-            budget, so for batched forward-only use pass "forward" (a ``while_loop``:
-            jvp/jacfwd and vmap, no vjp).
 
     Returns:
         F̄ at ``times`` (a jax array; dimensionless, as ``Result.force``). Times the run did not
@@ -332,7 +327,7 @@ def force_curve(plan: Plan, beta, z0, times=None, *, mode: str = "reverse"):
     """
     times = plan.t if times is None else times
     traj = rollout(
-        plan.disc, beta, z0, plan.drive, plan.t_end, plan.tol, substrate=plan.substrate, mode=mode
+        plan.disc, beta, z0, plan.drive, plan.t_end, plan.tol, substrate=plan.substrate
     )
     return evaluate(traj.steps, times, "force")
 
@@ -545,7 +540,7 @@ _SERIES = ("t", "force", "film_min", "film_center", "outflow", "gap", "velocity"
 
 
 def _forward_rollout(d, b, z, h, s, te, pt, t):
-    return rollout(d, b, z, h, te, t, pt, substrate=s, mode="forward")
+    return rollout(d, b, z, h, te, t, pt, substrate=s)
 
 
 def _lower_rollout(disc, drive, substrate, tol, n_profiles):

@@ -162,6 +162,17 @@ def linear_step(
     system's inverse on the same factors (:func:`_factorised`) for the mobility's second stage.
     """
     g = beta * conductance
+    matrix, rhs = _linear_system(disc, g, dt, a0, gap_history_rate, compliance, known_load, row)
+    solve = _factorised(matrix)
+    x = solve(rhs)
+    p = jnp.concatenate([x[:-1], jnp.zeros(1, x.dtype)])
+    return p, x[-1], g, solve
+
+
+def _linear_system(disc: Discretisation, g, dt, a0, gap_history_rate, compliance, known_load,
+                   row):
+    """The matrix and right-hand side of :func:`linear_step`'s system for face conductances
+    ``g`` (β included)."""
     n = disc.r.shape[0] - 1
     idx = jnp.arange(n)
     off = jnp.arange(n - 1)
@@ -185,10 +196,7 @@ def linear_step(
     )
     rate = gap_history_rate + disc.influence @ known_load
     rhs = jnp.concatenate([-(area * rate[:-1] / dt), jnp.reshape(b, (1,)).astype(dtype)])
-    solve = _factorised(matrix)
-    x = solve(rhs)
-    p = jnp.concatenate([x[:-1], jnp.zeros(1, x.dtype)])
-    return p, x[-1], g, solve
+    return matrix, rhs
 
 
 def _factorised(matrix):
@@ -240,18 +248,44 @@ def _solve_two_stages(disc, beta, conductance, record: StepRecord, row, loads):
     of the film the first stage gives, g(h̄ⁿ⁺¹), replace the extrapolated ones g(h̄*) by one
     simplified-Newton correction M δ = (T(g(h̄ⁿ⁺¹)) - T(g(h̄*))) p̄ⁿ⁺¹. Returns p̄ⁿ⁺¹, Δz̄, the
     new conductances, the outer flux and the gap's history sum (the velocity's BDF formula needs
-    it)."""
+    it).
+
+    Derivatives are those of the fully implicit step (:func:`_implicit`), not of these two
+    stages: the values are the two stages', the tangents the implicit function theorem's."""
     history, (a0, _, a2, a3) = record.history, record.weights
     # Σ_j a_j z̄ⁿ⁺¹⁻ʲ = a₀Δz̄ + gap_history in the solved steps (Σ a_j = 0):
     # -a₂Δz̄ⁿ (BDF2), -a₂Δz̄ⁿ - a₃(Δz̄ⁿ + Δz̄ⁿ⁻¹) (BDF3)
     gap_history = -a2 * history.gap_step[0]
     if a3 is not None:
         gap_history = gap_history - a3 * (history.gap_step[0] + history.gap_step[1])
-    p, dz, g, solve = linear_step(
-        disc, beta, conductance, record.dt, a0, gap_history, loads.compliance, loads.known, row
+    sg = jax.lax.stop_gradient
+    p, dz, g_new, outflow = _two_stages(
+        disc, sg(beta), sg(conductance), sg(record.dt), sg(a0), sg(gap_history),
+        sg(history.gap[0]), sg(row), sg(loads.compliance), sg(loads.known),
+        lambda p: sg(loads.loads(p)[1]),
     )
-    z_first = history.gap[0] + dz
-    h_first = film_thickness(disc, z_first, loads.loads(p)[1])
+    compliance = 1.0 if loads.compliance is None else loads.compliance
+    system = ImplicitStep(
+        disc=disc, beta=beta, dt=record.dt, a0=a0, gap_history=gap_history,
+        compliance=compliance, known_load=loads.known,
+        load_offset=loads.loads(jnp.zeros_like(p))[1], row=tuple(row), gap=history.gap[0],
+    )
+    x = _implicit(jnp.concatenate([p[:-1], jnp.reshape(dz, (1,))]), system)
+    p_new = jnp.concatenate([x[:-1], jnp.zeros(1, x.dtype)])
+    _, g_implicit = _implicit_film(x, system)
+    g_new = _value_with_tangent_of(g_new, g_implicit)
+    outflow = _value_with_tangent_of(outflow, g_implicit[-1] * p_new[-2])
+    return p_new, x[-1], g_new, outflow, gap_history
+
+
+def _two_stages(disc, beta, conductance, dt, a0, gap_history, gap, row, compliance, known,
+                load_of):
+    """The values of :func:`_solve_two_stages` (the two stages on one factorisation)."""
+    p, dz, g, solve = linear_step(
+        disc, beta, conductance, dt, a0, gap_history, compliance, known, row
+    )
+    z_first = gap + dz
+    h_first = film_thickness(disc, z_first, load_of(p))
     g_new = beta * face_conductance(disc, h_first, film_at_midpoints(disc, h_first, z_first))
     residual = flux_divergence(g_new - g, p)
     delta = solve(jnp.concatenate([residual[:-1], jnp.zeros(1, p.dtype)]))
@@ -259,7 +293,113 @@ def _solve_two_stages(disc, beta, conductance, record: StepRecord, row, loads):
     # The rows now hold as A Δh̄ a₀/Δt̄ = T(g*) p̄_corrected + T(g_new - g*) p̄_first, and T
     # telescopes: the film's volume changes by exactly this outer flux, the one reported.
     outflow = -g[-1] * (corrected[-1] - corrected[-2]) - (g_new[-1] - g[-1]) * (p[-1] - p[-2])
-    return corrected, dz + delta[-1], g_new, outflow, gap_history
+    return corrected, dz + delta[-1], g_new, outflow
+
+
+class ImplicitStep(NamedTuple):
+    """The fully implicit step whose solution the two stages approximate: :func:`linear_step`'s
+    system with the conductances of the new film, g(h̄ⁿ⁺¹), and ūⁿ⁺¹ = c p̄ⁿ⁺¹ + ū₀."""
+
+    disc: Discretisation
+    beta: jax.Array
+    dt: jax.Array
+    a0: jax.Array
+    gap_history: jax.Array
+    compliance: jax.Array  # c
+    known_load: jax.Array
+    load_offset: jax.Array  # ū₀, the elastic load of p̄ⁿ⁺¹ = 0
+    row: tuple  # the drive's (α, s, b)
+    gap: jax.Array  # z̄ⁿ
+
+
+def _implicit_film(x, system: ImplicitStep):
+    """h̄ⁿ⁺¹ of the unknowns x = (p̄_0..p̄_{N-2}, Δz̄), and its face conductances g(h̄ⁿ⁺¹)
+    (β included)."""
+    p = jnp.concatenate([x[:-1], jnp.zeros(1, x.dtype)])
+    disc = system.disc
+    load = system.compliance * p + system.load_offset
+    z = system.gap + x[-1]
+    film = z + 0.5 * disc.r**2 + disc.influence @ load
+    return film, system.beta * face_conductance(disc, film, film_at_midpoints(disc, film, z))
+
+
+def _implicit_residual(x, system: ImplicitStep):
+    """The fully implicit step's residual at x = (p̄_0..p̄_{N-2}, Δz̄) (zero at its solution)."""
+    _, g = _implicit_film(x, system)
+    matrix, rhs = _linear_system(system.disc, g, system.dt, system.a0, system.gap_history,
+                                 system.compliance, system.known_load, system.row)
+    return matrix @ x - rhs
+
+
+def _implicit_jacobian(x, system: ImplicitStep):
+    """∂(residual)/∂x: the linear system's matrix at g(h̄ⁿ⁺¹) plus the conductances' dependence
+    on the film, -β ∂(T(g(h̄))p̄)/∂h̄ · ∂h̄/∂x, with the tridiagonal ∂(T(g(h̄))p̄)/∂h̄ read off
+    three jvps (nodes coloured i mod 3) and ∂h̄/∂p̄_j = c Ŵ_{:j}, ∂h̄/∂Δz̄ = 1."""
+    disc = system.disc
+    n = disc.r.shape[0]
+    p = jnp.concatenate([x[:-1], jnp.zeros(1, x.dtype)])
+    film, g = _implicit_film(x, system)
+    z = system.gap + x[-1]
+
+    def flux(h):
+        g = system.beta * face_conductance(disc, h, film_at_midpoints(disc, h, z))
+        return flux_divergence(g, p)
+
+    colours = jnp.arange(n) % 3
+    columns = jnp.stack([jax.jvp(flux, (film,), ((colours == k).astype(film.dtype),))[1]
+                         for k in range(3)])
+    rows = jnp.arange(n)
+    lower = columns[(rows - 1) % 3, rows]  # ∂/∂h̄_{i-1}
+    middle = columns[rows % 3, rows]
+    upper = columns[(rows + 1) % 3, rows]  # ∂/∂h̄_{i+1}
+    dh = jnp.concatenate(
+        [system.compliance * disc.influence[:, :-1], jnp.ones((n, 1), film.dtype)], axis=1
+    )
+    zero_row = jnp.zeros((1, n), film.dtype)
+    shifted_down = jnp.concatenate([zero_row, dh[:-1]])  # row i holds dh[i-1]
+    shifted_up = jnp.concatenate([dh[1:], zero_row])  # row i holds dh[i+1]
+    coupling = lower[:, None] * shifted_down + middle[:, None] * dh + upper[:, None] * shifted_up
+    matrix, _ = _linear_system(disc, g, system.dt, system.a0, system.gap_history,
+                               system.compliance, system.known_load, system.row)
+    return matrix - jnp.concatenate([coupling[:-1], jnp.zeros((1, n), film.dtype)])
+
+
+@jax.custom_jvp
+def _implicit(x, system: ImplicitStep):
+    """x, the step's unknowns, with the derivative of the fully implicit step's solution.
+
+    Why: the two stages take the mobility h̄³ from known levels (extrapolated, then corrected
+    once on frozen factors). Their values are second-order accurate, but their linearisation
+    treats the film's perturbation in the mobility explicitly: a term like ∂_r(3h̄²δh̄ ∂_r p̄),
+    an advection of δh̄ at a speed ∝ β h̄² |∂_r p̄| with an explicit step's stability limit. Near
+    dry (β ≳ 10⁶) the steps the primal needs outgrow that limit at the contact's edge and the
+    tangent grows without bound while the values stay right. The implicit function theorem on
+    the fully implicit step, R(xⁿ⁺¹; history, parameters) = 0, gives the tangent of a BDF step
+    that is implicit in every term, stable on any step the primal takes: one more dense LU per
+    step, for the derivatives only."""
+    return x
+
+
+@_implicit.defjvp
+def _implicit_jvp(primals, tangents):
+    x, system = primals
+    _, system_dot = tangents
+    jacobian = jax.lax.stop_gradient(_implicit_jacobian(x, system))
+    _, residual_dot = jax.jvp(lambda s: _implicit_residual(x, s), (system,), (system_dot,))
+    lu, pivots, _ = jax.lax.linalg.lu(jacobian)
+    x_dot = -jax.scipy.linalg.lu_solve((lu, pivots), residual_dot)
+    return x, x_dot
+
+
+@jax.custom_jvp
+def _value_with_tangent_of(value, proxy):
+    """``value``, with the tangent of ``proxy`` (the same quantity of the implicit step)."""
+    return value
+
+
+@_value_with_tangent_of.defjvp
+def _value_with_tangent_of_jvp(primals, tangents):
+    return primals[0], tangents[1]
 
 
 def step(disc: Discretisation, beta, drive, substrate, history: History, t, t_new, order,

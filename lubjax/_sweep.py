@@ -66,7 +66,7 @@ class SweepResult(NamedTuple):
 
 
 def _one(tol, disc, history, substrate, t_end, times, b, z):
-    traj = rollout(disc, b, z, history, t_end, tol, substrate=substrate, mode="forward")
+    traj = rollout(disc, b, z, history, t_end, tol, substrate=substrate)
     keep = traj.steps.accepted
     positive = jnp.all(jnp.where(keep, traj.steps.film_min > 0, True))
     ok = (traj.status == DONE) & positive

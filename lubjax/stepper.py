@@ -7,8 +7,8 @@ A run is three calls::
     traj = rollout(disc, beta, z0, drive, t_end, Tolerance(...), substrate=substrate)
     force = evaluate(traj.steps, times, "force")        # the stepper's interpolant, traceable
 
-``rollout`` is a pure function of its arguments (``jit``, ``vmap``, ``jvp``; ``mode="reverse"``
-also ``vjp``/``jax.grad``). The mesh a run of :func:`lubjax.relax` gets is
+``rollout`` is a pure function of its arguments (``jit``, ``vmap``, ``jvp``/``jacfwd``,
+``vjp``/``jax.grad``). The mesh a run of :func:`lubjax.relax` gets is
 :func:`lubjax.mesh_for`; ``Settings.mesh()`` and ``Settings.tolerance()`` give the shared mesh and
 the tolerance of a :class:`lubjax.Settings`.
 

@@ -147,7 +147,7 @@ def test_vmap_and_forward_gradient_in_beta_and_z0():
     settings = lubjax.Settings(dr=0.05, mesh_growth=1.1, length=50.0, rtol=1e-9,
                                max_steps=100_000, error_estimate=False)
     plan = lubjax.make_plan(1.5, settings=settings, times=np.linspace(0, 1.5, 31))
-    f = jax.jit(lambda b, z: lubjax.force_curve(plan, b, z, mode="forward"))
+    f = jax.jit(lambda b, z: lubjax.force_curve(plan, b, z))
     betas = jnp.array([50.0, 200.0])
     batched = jax.vmap(f, in_axes=(0, None))(betas, 0.8)
     for k, b in enumerate(betas):

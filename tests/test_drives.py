@@ -160,35 +160,33 @@ def test_restitution_rises_with_stokes_number():
 )
 @pytest.mark.slow
 def test_drive_gradients_reverse_forward_and_differences(drive):
-    """d(gap at a few times)/d(β, the drive's number): reverse (checkpointed scan) = forward
-    (jvp) to 1e-6; forward = central differences of the adaptive solution. As in
-    test_stepper's check, ε is sized to the step-choice noise of the adaptive solution (jumps of
-    the order of the local error), not to eps: ε = 1e-3·|x| at rtol = 1e-9. The reverse run's
-    scan is sized to ~2× the attempts it needs (676-1644 at rtol 1e-6): a scan runs its whole
-    budget, and 100 000 attempts cost ~40 s of the suite; a budget too small gives NaN, which
-    fails the comparison."""
+    """d(gap at a few times)/d(β, the drive's number): reverse (the checkpointed adjoint) =
+    forward (the forward replay) to 1e-6; forward = central differences of the adaptive
+    solution. As in test_stepper's check, ε is sized to the step-choice noise of the adaptive
+    solution (jumps of the order of the local error), not to eps: ε = 1e-3·|x| at
+    rtol = 1e-9."""
     times = jnp.array([0.5, 1.0, 2.0])
     leaves, treedef = jax.tree_util.tree_flatten(drive)
     p0 = jnp.array([50.0, float(leaves[0])])
 
-    def gaps_fn(rtol, mode, max_steps=100_000):
+    def gaps_fn(rtol, max_steps=100_000):
         settings = lubjax.Settings(rtol=rtol, dr=0.05, length=20.0, mesh_growth=1.2,
                                    max_steps=max_steps, error_estimate=False)
         plan = lubjax.make_plan(2.0, drive=drive, settings=settings)
 
         def gaps(p):
             d = jax.tree_util.tree_unflatten(treedef, [p[1], *leaves[1:]])
-            traj = lubjax.stepper.rollout(plan.disc, p[0], 1.0, d, plan.t_end, plan.tol, mode=mode)
+            traj = lubjax.stepper.rollout(plan.disc, p[0], 1.0, d, plan.t_end, plan.tol)
             return lubjax.stepper.evaluate(traj.steps, times, "gap")
 
         return gaps
 
-    rev = jax.jacrev(gaps_fn(1e-6, "reverse", 3500))(p0)
-    fwd = jax.jacfwd(gaps_fn(1e-6, "forward", 3500))(p0)
+    rev = jax.jacrev(gaps_fn(1e-6))(p0)
+    fwd = jax.jacfwd(gaps_fn(1e-6))(p0)
     assert np.all(np.isfinite(rev))
     np.testing.assert_allclose(rev, fwd, rtol=1e-6, atol=1e-14)
 
-    f = jax.jit(gaps_fn(1e-9, "forward"))
+    f = jax.jit(gaps_fn(1e-9))
     jac = np.asarray(jax.jit(jax.jacfwd(f))(p0))
     for j in range(2):
         h = 1e-3 * float(p0[j])

@@ -15,7 +15,8 @@ from helpers import ACCURACY_T_OUT, COARSE, SCENES, accuracy_reference
 @pytest.mark.parametrize("order", [2, 3])
 @pytest.mark.slow
 def test_grad_agrees_with_jacfwd(order):
-    """jax.grad (checkpointed scan) of a scalar loss of the force curve equals forward mode."""
+    """jax.grad (the checkpointed adjoint) of a scalar loss of the force curve equals forward
+    mode (the forward replay): two implementations of one derivative."""
     plan = lubjax.make_plan(2.0, settings=lubjax.Settings(**COARSE, max_steps=2000, order=order),
                             times=np.linspace(0.1, 2.0, 40))
     target = jnp.linspace(0.5, 0.1, 40)
@@ -31,11 +32,15 @@ def test_grad_agrees_with_jacfwd(order):
     np.testing.assert_allclose(g_rev, g_fwd, rtol=1e-6)
 
 
-def test_reverse_and_forward_modes_compute_the_same_run():
+def test_a_differentiated_run_has_the_values_of_the_plain_run():
+    """Under jvp and vjp the loop also records the steps the derivatives replay: the values it
+    returns are the plain run's."""
     plan = lubjax.make_plan(1.5, settings=lubjax.Settings(**COARSE, max_steps=2000))
-    a = lubjax.force_curve(plan, 50.0, 0.8, mode="reverse")
-    b = lubjax.force_curve(plan, 50.0, 0.8, mode="forward")
-    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
+    plain = lubjax.force_curve(plan, 50.0, 0.8)
+    forward, _ = jax.jvp(lambda b: lubjax.force_curve(plan, b, 0.8), (50.0,), (1.0,))
+    reverse, _ = jax.vjp(lambda b: lubjax.force_curve(plan, b, 0.8), 50.0)
+    np.testing.assert_allclose(forward, plain, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(reverse, plain, rtol=1e-12, atol=1e-15)
 
 
 @pytest.mark.slow
@@ -47,7 +52,7 @@ def test_gradient_against_central_differences():
     the frozen steps leave out is O(rtol^{2/3}) and the first, unchecked step's error."""
     settings = lubjax.Settings(rtol=1e-9, **COARSE, max_steps=100_000)
     plan = lubjax.make_plan(2.0, settings=settings, times=np.linspace(0.2, 2.0, 10))
-    f = jax.jit(lambda p: lubjax.force_curve(plan, p[0], p[1], mode="forward"))
+    f = jax.jit(lambda p: lubjax.force_curve(plan, p[0], p[1]))
     x = jnp.array([60.0, 0.9])
     J = np.asarray(jax.jit(jax.jacfwd(f))(x))
     for k in range(2):
@@ -69,7 +74,7 @@ def test_results_do_not_depend_on_requested_times(order):
     np.testing.assert_allclose(b.pressure @ weights, b.at([0.123, 1.0, 2.71]), rtol=1e-12)
     # Thousands of output times cost no steps.
     plan = lubjax.make_plan(3.0, settings=s, times=np.linspace(0, 3, 5000))
-    f = np.asarray(lubjax.force_curve(plan, 100.0, 0.7, mode="forward"))
+    f = np.asarray(lubjax.force_curve(plan, 100.0, 0.7))
     np.testing.assert_allclose(f[np.searchsorted(plan.t, a.t[-1])], a.force[-1], rtol=1e-12)
 
 

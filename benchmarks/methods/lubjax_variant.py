@@ -29,8 +29,7 @@ _COMPILED: dict = {}
 def _compiled(disc, tol, history):
     key = (disc.r.shape[0], tol)
     if key not in _COMPILED:
-        fn = jax.jit(lambda d, b, z, h, te: lubjax.stepper.rollout(d, b, z, h, te, tol,
-                                                                     mode="forward"))
+        fn = jax.jit(lambda d, b, z, h, te: lubjax.stepper.rollout(d, b, z, h, te, tol))
         start = time.perf_counter()
         _COMPILED[key] = fn.lower(disc, 1.0, 1.0, history, 1.0).compile()
         return _COMPILED[key], time.perf_counter() - start

@@ -65,7 +65,7 @@ def coarsened(mesh: lubjax.Mesh, lo: float, hi: float) -> lubjax.Mesh:
 def run(mesh, settings, beta, z0, t_end, t_out):
     plan = lubjax.Plan(lubjax.stepper.discretise(mesh), settings.tolerance(), lubjax.RampHold(),
                        t_end, t_out, mesh)
-    curve = jax.jit(lambda b, z: lubjax.force_curve(plan, b, z, mode="forward"))
+    curve = jax.jit(lambda b, z: lubjax.force_curve(plan, b, z))
     curve(beta, z0).block_until_ready()
     start = time.perf_counter()
     force = np.asarray(curve(beta, z0).block_until_ready())
