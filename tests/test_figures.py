@@ -69,3 +69,80 @@ def test_the_readme_figure_says_its_axes_and_limits_in_words(k):
                     "rigid sphere squeezing the film (short-time limit)"} <= set(texts)
     finally:
         plt.close(fig)
+
+
+# --------------------------------------------------------------------------- lubjax-fit --plot
+
+K = 0.05  # the cantilever's spring constant [N/m]
+Z0 = 0.4e-6  # the fitted contact point [m]
+
+
+def _fit(metadata: dict, drive: str = "spring"):
+    """A stand-in fit of an approach (1 s) and a dwell (1 s) at 20 nN/μm of tip travel."""
+    from test_cli_errors import _fake_fit
+
+    from fitting import make_trace
+    from fitting._model import ModelSpec
+
+    t = np.linspace(0.0, 2.0, 200)
+    stage = 2e-6 * np.minimum(t, 1.0)
+    force = 0.02 * np.maximum(stage - Z0, 0.0) / (1 + 0.02 / K) + 1e-10 * np.sin(40 * t)
+    tr = make_trace(t, stage, force, 20e-6, metadata)
+    (res,) = _fake_fit([tr])
+    res = res._replace(input=tr.displacement, values={**res.values, "z0": Z0})
+    if drive == "force":  # load control: the force is the input, the tip's travel the response
+        tip = stage - force / K
+        res = res._replace(spec=ModelSpec(drive="force"), input=force, data=tip, model=tip)
+    return res
+
+
+def _figure(res):
+    from fitting._cli import fit_figure
+
+    return fit_figure(res)
+
+
+AFM = {"drive": "spring", "stiffness_N_m": repr(K), "instrument_file": "cell.jpk-force"}
+
+
+def test_an_afm_fit_is_drawn_against_indentation():
+    res = _fit({**AFM, "segments": "approach"})
+    fig = _figure(res)
+    try:
+        ax = fig.axes[0]
+        assert ax.get_xlabel() == "indentation: tip travel past contact [μm]"
+        assert ax.get_ylabel() == "force [nN]"
+        data = ax.lines[0]
+        # the tip: the stage less the cantilever's bending F/k, from the fitted contact point
+        np.testing.assert_allclose(data.get_xdata(), (res.input - res.data / K - Z0) * 1e6)
+        np.testing.assert_allclose(data.get_ydata(), res.data * 1e9)
+        # approach only: no time view of the data beside it (the residuals keep time)
+        assert [a.get_xlabel() for a in fig.axes if a.lines and a is not ax] == ["time [s]"]
+    finally:
+        plt.close(fig)
+
+
+@pytest.mark.parametrize("drive", ["spring", "force"])
+def test_an_afm_fit_with_a_dwell_keeps_the_time_view(drive):
+    res = _fit({**AFM, "segments": "approach,dwell"}, drive)
+    fig = _figure(res)
+    try:
+        (ind,) = [a for a in fig.axes if a.get_xlabel().startswith("indentation: tip travel")]
+        (time_view,) = [a for a in fig.axes if a.get_title() == "against time"]
+        assert time_view.get_xlabel() == "time [s]"
+        np.testing.assert_allclose(time_view.lines[0].get_xdata(), res.time)
+        if drive == "force":  # the response is the tip's travel, the force the input
+            np.testing.assert_allclose(ind.lines[0].get_xdata(), (res.data - Z0) * 1e6)
+            np.testing.assert_allclose(ind.lines[0].get_ydata(), res.input * 1e9)
+    finally:
+        plt.close(fig)
+
+
+def test_a_tribometer_fit_stays_against_time():
+    res = _fit({"sample": "bead 3"})
+    fig = _figure(res)
+    try:
+        assert not [a for a in fig.axes if "indentation" in a.get_xlabel()]
+        np.testing.assert_allclose(fig.axes[0].lines[0].get_xdata(), res.time)
+    finally:
+        plt.close(fig)
