@@ -217,11 +217,11 @@ def _add_bounce_command(sub):
     b.add_argument("--mass", type=positive_float, help="sphere mass [kg]")
     b.add_argument("--density", type=positive_float, help="sphere density [kg/m³] (or --mass)")
     b.add_argument("--speed", type=positive_float, help="approach speed V [m/s]")
-    b.add_argument("--gap", type=float, help="initial gap x0 [m]")
+    b.add_argument("--gap", type=float, help="initial gap [m]")
     b.add_argument("--weight", type=float, default=0.0,
                    help="constant force toward the wall [N] (weight less buoyancy; default 0)")
     b.add_argument("--t-end", type=positive_float, default=None,
-                   help="end time [s] (default 20 x0/V)")
+                   help="end time [s] (default 20 --gap/--speed)")
     _add_substrate(b)
     _add_accuracy(b)
     return b
@@ -571,7 +571,7 @@ def _bounce(args) -> int:
         velocity=res.velocity.tolist(),
         velocity_m_s=(res.velocity * v).tolist(),
         restitution=None if math.isnan(e) else e,
-        restitution_read_at="the starting gap x0, moving away",
+        restitution_read_at="the starting gap (--gap), moving away",
         stokes=test.stokes,
         elasticity_davis=test.elasticity,
         mass_kg=mass,
@@ -599,7 +599,7 @@ def bounce_summary(res, test, e) -> str:
         f"{res.t[peak] * ts:.4g} s; minimum film thickness {res.film_min[thin] * x0 * 1e6:.4g} um "
         f"at t = {res.t[thin] * ts:.4g} s; lowest sphere position (rigid body) z = "
         f"{res.gap[low] * x0 * 1e6:.4g} um at t = {res.t[low] * ts:.4g} s{indent}; restitution "
-        + ("none (no rebound to x0)" if math.isnan(e) else f"{e:.4f}")
+        + ("none (no rebound to the starting --gap)" if math.isnan(e) else f"{e:.4f}")
         + f"; {res.accepted} steps, run {res.run_s:.3f} s, compile {res.compile_s:.2f} s"
     )
 

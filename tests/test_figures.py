@@ -5,6 +5,7 @@ results (no solver run) and its matplotlib artists are read back."""
 from __future__ import annotations
 
 import importlib.util
+import re
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -144,5 +145,70 @@ def test_a_tribometer_fit_stays_against_time():
     try:
         assert not [a for a in fig.axes if "indentation" in a.get_xlabel()]
         np.testing.assert_allclose(fig.axes[0].lines[0].get_xdata(), res.time)
+    finally:
+        plt.close(fig)
+
+
+# --------------------------------------------------------------------------- lubjax's figures
+
+
+def _run(n=30):
+    t = np.linspace(0.0, 3.0, n)
+    r = np.linspace(0.0, 3.0, 40)
+    return SimpleNamespace(
+        t=t, gap=1.0 - t / 2, velocity=-np.ones(n), force=np.linspace(0.0, 1.0, n),
+        film_min=np.linspace(1.0, 0.1, n), film_center=np.linspace(1.0, 0.2, n), r=r,
+        profile_times=np.array([1.0, 3.0]), pressure=np.ones((2, r.size)),
+        film=np.ones((2, r.size)), force_error=np.full(n, 1e-4), beta=53.9, z0=1.0)
+
+
+def _title(monkeypatch, draw) -> str:
+    """The title of the figure ``draw()`` writes (the file is not written)."""
+    from lubjax import _plotting
+
+    seen = []
+    monkeypatch.setattr(_plotting, "save_figure", lambda fig, *a, **k: seen.append(fig))
+    draw(_plotting)
+    (fig,) = seen
+    title = fig._suptitle.get_text()
+    plt.close(fig)
+    return title
+
+
+def test_si_titles_name_the_command_line_options(monkeypatch):
+    """The values a user gave are named by the options they gave them with (not the paper's
+    x0, V, v0, d_c, z0)."""
+    from lubjax._units import Collision, CreepTest, RelaxationTest
+
+    bounce = Collision(1e6, 2e-3, 0.01, 2.6e-4, 0.05, 50e-6, 0.0)
+    creep = CreepTest(3.92e6, 2e-3, 100.0, 0.03, 1.0, 140e-6)
+    relax = RelaxationTest(3.92e6, 2e-3, 100.0, 1e-4, 140e-6, 140e-6)
+    titles = [_title(monkeypatch, lambda p: p.plot_drive(_run(), "b.png", "bounce", bounce)),
+              _title(monkeypatch, lambda p: p.plot_drive(_run(), "c.png", "creep", creep)),
+              _title(monkeypatch, lambda p: p.plot_result(_run(), "r.png", test=relax))]
+    assert titles[0].startswith(
+        "bounce: a sphere of mass 0.00026 kg at --speed 0.05 m/s from --gap 5e-05 m; E* = 1e+06 "
+        "Pa, --viscosity 0.01 Pa s, --radius 0.002 m")
+    assert "--viscosity 100 Pa s, --radius 0.002 m, --gap 0.00014 m" in titles[1]
+    assert titles[2].startswith(
+        "relax: travel ramped at --speed 0.0001 m/s to --indent 0.00014 m")
+    assert "--gap 0.00014 m" in titles[2]
+    for title in titles:
+        assert not re.search(r"\b(x0|V|v0|d_c|z0|η|R) =", title), title
+
+
+def test_the_relax_figure_names_its_limits_in_words(monkeypatch):
+    from lubjax import _plotting
+
+    seen = []
+    monkeypatch.setattr(_plotting, "save_figure", lambda fig, *a, **k: seen.append(fig))
+    res = _run()
+    res.z0 = 0.5
+    _plotting.plot_result(res, "r.png")
+    (fig,) = seen
+    try:
+        legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+        assert legend == ["lubjax", "rigid sphere squeezing the film (short-time limit)",
+                          "Hertz contact (long-time limit)"]
     finally:
         plt.close(fig)
