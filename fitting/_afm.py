@@ -51,11 +51,18 @@ import re
 
 import numpy as np
 
-from ._io import MAX_TRAVEL_OVER_RADIUS, TraceError, make_trace, unzipped, zip_export, zip_head
+from ._io import (
+    JPK_EXTENSIONS,
+    MAX_TRAVEL_OVER_RADIUS,
+    TraceError,
+    make_trace,
+    unzipped,
+    zip_export,
+    zip_head,
+)
 
 #: File name endings read through afmformats (lower case).
-AFM_EXTENSIONS = (".jpk-force", ".jpk-force-map", ".jpk-qi-data", ".jpk-qi-series", ".ibw",
-                  ".h5", ".tab")
+AFM_EXTENSIONS = (*JPK_EXTENSIONS, ".ibw", ".h5", ".tab")
 #: Segment names per afmformats modality, in the file's segment order.
 SEGMENT_NAMES = {
     "force-distance": ("approach", "retract"),

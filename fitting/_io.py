@@ -864,6 +864,8 @@ def _zip_error(path, exc) -> TraceError:
                       "the file inside")
 
 
+#: JPK's file types, zip archives themselves (fitting._afm reads them).
+JPK_EXTENSIONS = (".jpk-force", ".jpk-force-map", ".jpk-qi-data", ".jpk-qi-series")
 #: What a zip archive can raise on reading: corrupt, truncated, encrypted, an unknown method.
 _ZIP_ERRORS = (zipfile.BadZipFile, EOFError, RuntimeError, NotImplementedError)
 
@@ -891,6 +893,9 @@ def zip_export(path) -> str | None:
                      and os.path.basename(i.filename) != ".DS_Store"]
     except _ZIP_ERRORS as exc:
         raise _zip_error(path, exc) from None
+    if os.fspath(path).lower().endswith(JPK_EXTENSIONS):  # JPK's own files are zip archives
+        raise TraceError(f"{path}: a JPK AFM file, not a trace file: read it with "
+                         "fitting.read_afm (lubjax-fit reads it as it is)")
     if len(names) == 1:
         return names[0]
     if not names:

@@ -196,6 +196,9 @@ def test_a_zip_that_is_not_one_export_is_refused_naming_what_it_holds(tmp_path):
     with pytest.raises(ValueError, match=r"holding 6 files \(curve0\.csv, curve1\.csv, "
                        r"curve2\.csv, curve3\.csv, \.\.\. \(6 files\)\)"):
         read_trace(_zip(tmp_path / "six.zip", many))
+    with pytest.raises(ValueError, match=r"cell\.jpk-force: a JPK AFM file, not a trace file: "
+                       r"read it with fitting\.read_afm"):
+        read_trace(_zip(tmp_path / "cell.jpk-force", {"header.properties": "", "segments/": ""}))
     with pytest.raises(ValueError, match=r"none\.zip: a zip archive with no file in it$"):
         read_trace(_zip(tmp_path / "none.zip", {"folder/": b""}))
     # a member whose bytes do not match its checksum
