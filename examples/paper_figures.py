@@ -8,7 +8,7 @@ paper's uniform L̄ = 4 mesh. Figs 4-6: pressure, film thickness and substrate
 displacement at several times for β = 100 and z̄0 = 0.5, 1, 2 (solid: loading, dashed: hold;
 for z̄0 = 2, where the sphere stops short of the surface, the hold times resolve the pressure's
 decay on t_R = t_c/β), with the short-time rigid-squeeze (eq 12b) and long-time Hertz (eq 14)
-asymptotes in Fig 4a.
+asymptotes in Fig 4a; axes and legends say in words what each dimensionless quantity is.
 """
 
 from __future__ import annotations
@@ -45,45 +45,65 @@ def _profiles(beta, z0, settings=None):
                         settings=settings)
 
 
+#: Each profile figure: file, Result field, and its quantity in words (the paper's
+#: dimensionless variables, eqs 7-8: lengths in d_c, radii in √(R d_c), pressure in
+#: (2E*/π)√(d_c/R), time in t_c = d_c/v0).
+PROFILES = (
+    ("fig4_pressure.png", "pressure", "film pressure  p̄ = p / ((2E*/π)·√(d_c/R))"),
+    ("fig5_film.png", "film", "film thickness  h̄ = h / d_c"),
+    ("fig6_displacement.png", "displacement", "surface displacement  w̄ = w / d_c"),
+)
+RADIUS_LABEL = "radius  r̄ = r / √(R d_c)"
+HERTZ_LABEL = "Hertz contact (long-time limit)"
+SQUEEZE_LABEL = "rigid sphere squeezing the film (short-time limit)"
+SUPTITLE = ("{what} at β = {beta:g} as the sphere is pushed in to depth d_c (solid, "
+            "t̄ = t v0/d_c ≤ 1) and held (dashed); z̄0 = initial gap / d_c")
+
+
+def profile_figure(results: dict, field: str, label: str):
+    """One profile figure (a panel per z̄0 of ``results``, {z̄0: Result}), its axes and legends
+    in words; the pressure's z̄0 = 0.5 panel with the Hertz and rigid-squeeze limits."""
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
+    for ax, (z0, res) in zip(axes, results.items()):
+        sel = res.r <= 2.0
+        colors = plt.cm.viridis(np.linspace(0, 0.9, len(res.profile_times)))
+        for c, t, prof in zip(colors, res.profile_times, getattr(res, field)):
+            ls = "-" if t <= 1.0 else "--"
+            hold = (t - 1.0) * BETA
+            curve = (f"t̄ = {t:g}" if z0 <= 1.0 or t <= 1.0
+                     else f"t̄ = 1 + {hold:.2g} t_R")
+            ax.plot(res.r[sel], prof[sel], ls=ls, color=c, label=curve)
+        if field == "pressure" and z0 == 0.5:
+            ax.plot(res.r[sel], lubjax.hertz_pressure(res.r[sel], z0), "ko", ms=3,
+                    markevery=4, label=HERTZ_LABEL)
+            for t in (0.2, 0.4):
+                ax.plot(res.r[sel], lubjax.rigid_squeeze_pressure(res.r[sel], z0 - t, -1, 100),
+                        "rx", ms=3, markevery=4, label=SQUEEZE_LABEL if t == 0.2 else None)
+        if field == "film":
+            ax.set_ylim(0, 2.2 if z0 < 2 else 3.2)
+        title = f"initial gap z̄0 = {z0:g}"
+        if z0 > 1.0:
+            title += " (no contact: the hold decays on t_R = t_c/β)"
+        ax.set_title(title, fontsize=10 if z0 > 1.0 else 12)
+        ax.set_xlabel(RADIUS_LABEL)
+        ax.set_ylabel(label)
+    # the pressure falls to zero outside the contact: its legends go there, clear of the curves
+    loc = "upper right" if field == "pressure" else "best"
+    axes[0].legend(fontsize=7, ncol=2, loc=loc)
+    axes[2].legend(fontsize=7, ncol=2, loc=loc)
+    fig.suptitle(SUPTITLE.format(what=label.split("  ")[0].capitalize(), beta=BETA),
+                 fontsize=11)
+    fig.tight_layout()
+    return fig
+
+
 def figs_4_to_6(out, settings=None, dpi=110):
     results = {}
     for z0 in (0.5, 1.0, 2.0):
         print(f"  β = {BETA:g}, z̄0 = {z0}", file=sys.stderr)
         results[z0] = _profiles(BETA, z0, settings)
-    specs = [
-        ("fig4_pressure.png", "pressure", "p̄"),
-        ("fig5_film.png", "film", "h̄"),
-        ("fig6_displacement.png", "displacement", "w̄"),
-    ]
-    for name, field, label in specs:
-        fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
-        for ax, (z0, res) in zip(axes, results.items()):
-            sel = res.r <= 2.0
-            colors = plt.cm.viridis(np.linspace(0, 0.9, len(res.profile_times)))
-            for c, t, prof in zip(colors, res.profile_times, getattr(res, field)):
-                ls = "-" if t <= 1.0 else "--"
-                hold = (t - 1.0) * BETA
-                curve = (f"t̄ = {t:g}" if z0 <= 1.0 or t <= 1.0
-                         else f"t̄ = 1 + {hold:.2g} t_R")
-                ax.plot(res.r[sel], prof[sel], ls=ls, color=c, label=curve)
-            if field == "pressure" and z0 == 0.5:
-                ax.plot(res.r[sel], lubjax.hertz_pressure(res.r[sel], z0), "ko", ms=3,
-                        markevery=4, label="Hertz (eq 14)")
-                for t in (0.2, 0.4):
-                    ax.plot(res.r[sel], lubjax.rigid_squeeze_pressure(res.r[sel], z0 - t, -1, 100),
-                            "rx", ms=3, markevery=4,
-                            label="rigid squeeze (eq 12b)" if t == 0.2 else None)
-            if field == "film":
-                ax.set_ylim(0, 2.2 if z0 < 2 else 3.2)
-            title = f"β = {BETA:g}, z̄0 = {z0:g}"
-            if z0 > 1.0:
-                title += " (no contact: the hold decays on t_R = t_c/β)"
-            ax.set_title(title, fontsize=10 if z0 > 1.0 else 12)
-            ax.set_xlabel("r̄")
-            ax.set_ylabel(label)
-        axes[0].legend(fontsize=7, ncol=2)
-        axes[2].legend(fontsize=7, ncol=2)
-        fig.tight_layout()
+    for name, field, label in PROFILES:
+        fig = profile_figure(results, field, label)
         fig.savefig(os.path.join(out, name), dpi=dpi)
         plt.close(fig)
 
@@ -159,7 +179,7 @@ def main(argv=None):
     settings = None if args.rtol is None else lubjax.Settings(rtol=args.rtol)
     print("Figs 4-6", file=sys.stderr)
     figs_4_to_6(args.out, settings, args.dpi)
-    names = ["fig4_pressure.png", "fig5_film.png", "fig6_displacement.png"]
+    names = [name for name, _, _ in PROFILES]
     if not args.no_fig3:
         print("Fig 3", file=sys.stderr)
         fig3_refinement(args.out)

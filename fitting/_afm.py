@@ -44,17 +44,25 @@ or Igor files), else ``radius=`` (``--radius``) is required. Poisson ratio: ``po
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import re
 
 import numpy as np
 
-from ._io import MAX_TRAVEL_OVER_RADIUS, TraceError, make_trace
+from ._io import (
+    JPK_EXTENSIONS,
+    MAX_TRAVEL_OVER_RADIUS,
+    TraceError,
+    make_trace,
+    unzipped,
+    zip_export,
+    zip_head,
+)
 
 #: File name endings read through afmformats (lower case).
-AFM_EXTENSIONS = (".jpk-force", ".jpk-force-map", ".jpk-qi-data", ".jpk-qi-series", ".ibw",
-                  ".h5", ".tab")
+AFM_EXTENSIONS = (*JPK_EXTENSIONS, ".ibw", ".h5", ".tab")
 #: Segment names per afmformats modality, in the file's segment order.
 SEGMENT_NAMES = {
     "force-distance": ("approach", "retract"),
@@ -80,20 +88,37 @@ STAGE_NOISE_FACTOR = 1.2
 CAP = 0.95
 
 
-def is_afm_file(path) -> bool:
-    """Whether ``path`` is a vendor file read through afmformats (by its extension; a ``.txt``
-    only when it is an Optics11 Chiaro export)."""
-    name = os.fspath(path).lower()
+def _head(path, size: int = 4096) -> bytes:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(size)
+    except OSError:
+        return b""
+
+
+def _is_vendor_export(name: str, head) -> bool:
+    """A vendor file by its name (its extension; a ``.txt`` only when ``head()``, its first
+    bytes, show an Optics11 Chiaro export)."""
+    name = name.lower()
     if name.endswith(AFM_EXTENSIONS):
         return True
     if name.endswith(".txt"):
-        try:
-            with open(path, "rb") as fh:
-                head = fh.read(4096)
-        except OSError:
-            return False
-        return b"Chiaro" in head or b"Optics11" in head
+        first = head()
+        return b"Chiaro" in first or b"Optics11" in first
     return False
+
+
+def is_afm_file(path) -> bool:
+    """Whether ``path`` is a vendor file read through afmformats (by its extension; a ``.txt``
+    only when it is an Optics11 Chiaro export), or a zip archive holding one such file."""
+    path = os.fspath(path)
+    if _is_vendor_export(path, lambda: _head(path)):
+        return True
+    try:
+        member = zip_export(path)
+    except TraceError:
+        return False  # read_trace names what the archive holds
+    return member is not None and _is_vendor_export(member, lambda: zip_head(path, member))
 
 
 def _afmformats():
@@ -149,16 +174,17 @@ def _block_mean(a: np.ndarray, n_out: int) -> np.ndarray:
     return np.add.reduceat(a, edges[:-1]) / np.diff(edges)
 
 
-def load_curves(path):
-    """The afmformats curves of a file (a list; a force map gives one per point)."""
+def load_curves(path, name=None):
+    """The afmformats curves of a file (a list; a force map gives one per point); ``name``: the
+    file as messages name it (default ``path``)."""
     afmformats = _afmformats()
     try:
         return list(afmformats.load_data(os.fspath(path)))
     except (KeyboardInterrupt, SystemExit):
         raise
     except BaseException as exc:  # afmformats' MissingMetaDataError is a BaseException
-        raise TraceError(f"{path}: afmformats cannot read it: {type(exc).__name__}: {exc}"
-                         ) from None
+        raise TraceError(f"{name or path}: afmformats cannot read it: {type(exc).__name__}: "
+                         f"{exc}") from None
 
 
 def curve_arrays(curve, name: str = "curve") -> dict:
@@ -383,7 +409,8 @@ def read_afm(path, *, radius=None, poisson=None, segments=("approach",), baselin
 
     Args:
         path: a JPK ``.jpk-force``/``.jpk-force-map``/``.jpk-qi-*``, Igor ``.ibw``, afmformats
-            ``.h5``/``.tab`` or Optics11 Chiaro ``.txt`` file.
+            ``.h5``/``.tab`` or Optics11 Chiaro ``.txt`` file, or a zip archive holding one
+            (read as the file inside, named ``path/file`` in the traces).
         radius: tip radius R [m]; None takes the file's (Chiaro), else a TraceError.
         poisson: the sample's Poisson ratio (kept in the metadata: E = E*(1 - ν²) in reports).
         segments: "pause", "approach", "dwell", "retract"; the approach is required.
@@ -398,19 +425,26 @@ def read_afm(path, *, radius=None, poisson=None, segments=("approach",), baselin
 
     Raises:
         TraceError: afmformats not installed (``pip install lubjax[afm]``), a file it
-            cannot read, an unsupported imaging mode, no radius, a missing segment, a curve
+            cannot read, a zip archive that does not hold exactly one file, an unsupported
+            imaging mode, no radius, a missing segment, a curve
             index the file lacks, or a curve the checks of :func:`make_trace` refuse.
     """
-    all_curves = load_curves(path)
-    pick = range(len(all_curves)) if curves is None else curves
-    out = []
-    extra = _vendor_e(path)
-    for i in pick:
-        if not 0 <= i < len(all_curves):
-            raise TraceError(f"{path}: curve {i} does not exist (the file has "
-                             f"{len(all_curves)} curve(s), 0 to {len(all_curves) - 1})")
-        name = os.fspath(path) if len(all_curves) == 1 else f"{os.fspath(path)}#{i}"
-        out.append(curve_to_trace(all_curves[i], radius=radius, poisson=poisson,
-                                  segments=segments, baseline=baseline, max_samples=max_samples,
-                                  name=name, extra_metadata=extra, drive=drive))
+    path = os.fspath(path)
+    # JPK files are zip archives themselves: only another file is looked into
+    files = (contextlib.nullcontext((path, path)) if path.lower().endswith(AFM_EXTENSIONS)
+             else unzipped(path))
+    with files as (file, label):
+        all_curves = load_curves(file, label)
+        pick = range(len(all_curves)) if curves is None else curves
+        out = []
+        extra = _vendor_e(file)
+        for i in pick:
+            if not 0 <= i < len(all_curves):
+                raise TraceError(f"{label}: curve {i} does not exist (the file has "
+                                 f"{len(all_curves)} curve(s), 0 to {len(all_curves) - 1})")
+            name = label if len(all_curves) == 1 else f"{label}#{i}"
+            out.append(curve_to_trace(all_curves[i], radius=radius, poisson=poisson,
+                                      segments=segments, baseline=baseline,
+                                      max_samples=max_samples, name=name, extra_metadata=extra,
+                                      drive=drive))
     return out

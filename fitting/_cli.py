@@ -16,6 +16,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import math
 import os
 import shutil
 import sys
@@ -129,40 +130,81 @@ def summary_line(res: FitResult) -> str:
     )
 
 
-def plot_fit(res: FitResult, path: str) -> None:
-    """A figure of a fit: data and model, residuals (with their autocorrelation), and the fit
-    report.
+#: Units a figure may read values in (the one where the peak reads between 1 and 1000).
+_FORCE_UNITS = (("N", 1.0), ("mN", 1e3), ("μN", 1e6), ("nN", 1e9))
+_LENGTH_UNITS = (("m", 1.0), ("mm", 1e3), ("μm", 1e6), ("nm", 1e9))
 
-    Written atomically in the format of ``path``'s extension (png, pdf, svg, ...).
 
-    Args:
-        res: the :class:`FitResult`.
-        path: the file to write.
-    """
+def _unit(values, units) -> tuple[str, float]:
+    """(unit, factor) in which the largest |value| reads between 1 and 1000 (mN and μm for a
+    tribometer, nN for an AFM cantilever)."""
+    peak = float(np.max(np.abs(values))) if np.size(values) else 0.0
+    peak = peak if math.isfinite(peak) and peak > 0 else 1.0
+    return next(((u, s) for u, s in units if peak * s >= 1.0), units[-1])
+
+
+def _indentation(res: FitResult):
+    """An AFM or indenter vendor file's fit against indentation: (indentation of the data, of
+    the model, force of the data, of the model), the indentation being the tip's travel past
+    the fitted contact point z0; None for other traces (or a result without its input)."""
+    if "instrument_file" not in res.metadata or res.input is None:
+        return None
+    z0 = res.values["z0"]
+    if res.spec.drive == "force":  # load control: the response is the tip's own travel
+        return res.data - z0, res.model - z0, res.input, res.input
+    k = float(res.metadata["stiffness_N_m"])  # the tip: the stage less the bending F/k
+    return (res.input - res.data / k - z0, res.input - res.model / k - z0, res.data,
+            res.model)
+
+
+def fit_figure(res: FitResult):
+    """The figure of :func:`plot_fit` (a matplotlib Figure; close it when done)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     force = res.spec.response == "force"
-    # the unit in which the peak reads between 1 and 1000 (mN and μm for a tribometer, nN for
-    # an AFM cantilever)
-    peak = float(np.max(np.abs(res.data))) or 1.0
-    units = (("N", 1.0), ("mN", 1e3), ("μN", 1e6), ("nN", 1e9)) if force else (
-        ("m", 1.0), ("mm", 1e3), ("μm", 1e6), ("nm", 1e9))
-    unit, scale = next(((u, s) for u, s in units if peak * s >= 1.0), units[-1])
+    unit, scale = _unit(res.data, _FORCE_UNITS if force else _LENGTH_UNITS)
     label = "force" if force else "approach"
+    against = _indentation(res)
     fig = plt.figure(figsize=(13, 8))
     gs = fig.add_gridspec(3, 2, width_ratios=[1.55, 1], height_ratios=[3, 1.3, 1.2],
                           hspace=0.35, wspace=0.08)
-    ax = fig.add_subplot(gs[0, 0])
-    ax.plot(res.time, res.data * scale, ".", ms=2.0, color="0.6", label="data")
-    ax.plot(res.time, res.model * scale, "-", color="C3", lw=1.4, label="lubjax model (fit)")
-    ax.set_ylabel(f"{label} [{unit}]")
-    ax.set_title(os.path.basename(res.name) or "trace")
-    ax.legend(loc="best")
-    ax.grid(alpha=0.3)
-    ax2 = fig.add_subplot(gs[1, 0], sharex=ax)
+    name = os.path.basename(res.name) or "trace"
+    if against is None:
+        ax = fig.add_subplot(gs[0, 0])
+        time_ax = ax
+    else:
+        # AFM users read force against indentation; the time view is kept beside it where a
+        # dwell (relaxation or creep at a held height or force) is fitted
+        dwell = "dwell" in res.metadata.get("segments", "")
+        top = gs[0, 0].subgridspec(1, 2, wspace=0.3) if dwell else None
+        ax = fig.add_subplot(top[0, 0] if dwell else gs[0, 0])
+        x_data, x_model, f_data, f_model = against
+        f_unit, f_scale = _unit(f_data, _FORCE_UNITS)
+        x_unit, x_scale = _unit(np.concatenate([x_data, x_model]), _LENGTH_UNITS)
+        ax.plot(x_data * x_scale, f_data * f_scale, ".", ms=2.0, color="0.6", label="data")
+        ax.plot(x_model * x_scale, f_model * f_scale, "-", color="C3", lw=1.4,
+                label="lubjax model (fit)")
+        ax.axvline(0.0, color="k", lw=0.8, ls=":", label="fitted contact point (z0)")
+        ax.set_xlabel(f"indentation: tip travel past contact [{x_unit}]")
+        ax.set_ylabel(f"force [{f_unit}]")
+        ax.legend(loc="upper left", fontsize=8)
+        ax.grid(alpha=0.3)
+        ax.set_title(name)
+        time_ax = fig.add_subplot(top[0, 1]) if dwell else None
+    if time_ax is not None:
+        time_ax.plot(res.time, res.data * scale, ".", ms=2.0, color="0.6", label="data")
+        time_ax.plot(res.time, res.model * scale, "-", color="C3", lw=1.4,
+                     label="lubjax model (fit)")
+        time_ax.set_ylabel(f"{label} [{unit}]")
+        if time_ax is not ax:
+            time_ax.set_xlabel("time [s]")
+        time_ax.set_title(name if time_ax is ax else "against time")
+        time_ax.legend(loc="best", fontsize=8 if against is not None else None)
+        time_ax.grid(alpha=0.3)
+    ax2 = fig.add_subplot(gs[1, 0], sharex=time_ax if time_ax is not None else None)
     resid = (res.data - res.model) * scale
     ax2.plot(res.time, resid, ".", ms=2.0, color="C0")
     ax2.axhline(0.0, color="k", lw=0.8)
@@ -188,6 +230,23 @@ def plot_fit(res: FitResult, path: str) -> None:
     ax3.axis("off")
     ax3.text(0.0, 1.0, fit_report(res), transform=ax3.transAxes, va="top", ha="left",
              family="monospace", fontsize=6.8)
+    return fig
+
+
+def plot_fit(res: FitResult, path: str) -> None:
+    """A figure of a fit: data and model, residuals (with their autocorrelation), and the fit
+    report. An AFM or indenter vendor file's fit is drawn against indentation (the tip's travel
+    past the fitted contact point), and against time too when it has a dwell.
+
+    Written atomically in the format of ``path``'s extension (png, pdf, svg, ...).
+
+    Args:
+        res: the :class:`FitResult`.
+        path: the file to write.
+    """
+    import matplotlib.pyplot as plt
+
+    fig = fit_figure(res)
     try:
         save_figure(fig, path, dpi=120, bbox_inches="tight")
     finally:

@@ -125,6 +125,8 @@ class FitResult(NamedTuple):
         model: the fitted response at the samples [N or m].
         metadata: the trace's ``# key: value`` metadata.
         fixed: the parameters held at given values (``fixed=``), stderr 0.
+        input: the drive's measured input at the samples: the stage (indenter) travel [m], or
+            the load [N] under load control (None where not recorded).
     """
 
     name: str
@@ -149,6 +151,7 @@ class FitResult(NamedTuple):
     model: np.ndarray
     metadata: dict
     fixed: tuple = ()
+    input: np.ndarray | None = None
 
     @property
     def E_star(self) -> float:
@@ -1065,6 +1068,7 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
         n_iterations=outcome.iterations, n_model_runs=runs, method=method, wall_s=wall,
         start=start, flags=tuple(flags), time=trace.time, data=_channel(trace, spec),
         model=model, metadata=dict(trace.metadata), fixed=tuple(fixed),
+        input=trace.force if spec.drive == "force" else trace.displacement,
     )
 
 

@@ -31,17 +31,22 @@ are refused the same way, with the likely unit mistake (:func:`check_scales`), a
 force negative in compression (:func:`check_force_sign`, once the drive is known).
 
 Reading is numpy-fast: the numeric block goes through ``numpy.loadtxt``; only a file that it
-rejects is parsed again line by line, to name the offending line and column.
+rejects is parsed again line by line, to name the offending line and column. A zip archive
+holding one file (a zipped export) is read as that file; one holding several is refused with
+their names.
 """
 
 from __future__ import annotations
 
 import codecs
+import contextlib
 import itertools
 import math
 import os
 import re
+import tempfile
 import warnings
+import zipfile
 from array import array
 from typing import NamedTuple
 
@@ -60,6 +65,9 @@ RADIUS_RANGE_M = (1e-7, 1.0)
 MAX_FORCE_N = 1e3
 
 _EOL = re.compile(r"\r\n|\r|\n")
+#: Added to a message about a ','-separated file whose rows split into more cells than expected.
+_COMMA_HINT = ("; decimal commas? With ',' as the separator a decimal comma splits a number in "
+               "two cells: export with ';' (or tabs) as the separator, or with decimal points")
 
 
 class TraceError(ValueError):
@@ -516,15 +524,22 @@ def _preamble(lines, name: str) -> list:
     return buf
 
 
-def _header_index(body, first, sep, n_data, columns, by_number, idx, name: str):
+def _uneven(sep, body) -> bool:
+    """Whether the numeric-looking rows of a ','-separated ``body`` differ in their number of
+    cells (as decimal commas make them: "0,5,12,1" next to "1,13,2")."""
+    counts = {len(_split(line, sep)) for _, (_, line) in body if _NUMERIC_LOOK.match(line)}
+    return sep == "," and len(counts) > 1
+
+
+def _header_index(body, first, sep, n_data, columns, by_number, idx, name: str, hint: str):
     """Index into ``body`` of the header row (None: a file without one, read by column number);
-    ``first``: index of the first data row."""
+    ``first``: index of the first data row; ``hint``: added to a message (decimal commas)."""
     expected = ",".join(COLUMNS)
 
     def no_header():
         return TraceError(
             f"{name}: no header row (expected {expected}; a file without one needs --columns by "
-            "number, e.g. --columns time=1,displacement=2,force=3)"
+            f"number, e.g. --columns time=1,displacement=2,force=3{hint})"
         )
 
     h = None
@@ -604,6 +619,9 @@ def _scan(lines, name: str, columns=None, units=None, force_sign=1.0):
     Returns (layout, pending): ``pending`` are the lines read after the header row (or, without
     one, from the first data row), still to be parsed as data."""
     buf = _preamble(lines, name)
+    if not any(line for _, line in buf):
+        what = "holds only blank lines" if buf else "is empty"
+        raise TraceError(f"{name}: the file {what}: no header row, no data")
     body = [(k, (n, line)) for k, (n, line) in enumerate(buf) if line and not line.startswith("#")]
     sep, comma = _detect_separator([x for _, x in body])
     by_number = columns is not None and all(isinstance(v, int) for v in columns.values())
@@ -611,7 +629,8 @@ def _scan(lines, name: str, columns=None, units=None, force_sign=1.0):
     first = next((i for i, (_, (_, line)) in enumerate(body)
                   if _is_numeric(_split(line, sep), comma, idx)), None)
     n_data = len(_split(body[first][1][1], sep)) if first is not None else None
-    h = _header_index(body, first, sep, n_data, columns, by_number, idx, name)
+    hint = _COMMA_HINT if _uneven(sep, body) else ""
+    h = _header_index(body, first, sep, n_data, columns, by_number, idx, name, hint)
     if h is not None:
         k_head, (head_line, head_text) = body[h]
         start = k_head + 1
@@ -622,7 +641,8 @@ def _scan(lines, name: str, columns=None, units=None, force_sign=1.0):
     metadata, meta_line = _metadata(buf[:meta_end], name)
     cells = _header_cells(head_text, sep, n_data) if head_text is not None else None
     if columns is None:
-        use, labels, header_units = _canonical_columns(cells, head_line, head_text, name, sep)
+        use, labels, header_units = _canonical_columns(cells, head_line, head_text, name, sep,
+                                                       hint)
         ncells, exact = len(cells), True
     else:
         use, labels, header_units = _mapped_columns(columns, cells, head_line, name)
@@ -648,18 +668,18 @@ def _scan(lines, name: str, columns=None, units=None, force_sign=1.0):
     return layout, buf[start:]
 
 
-def _canonical_columns(cells, line: int, text: str, name: str, sep):
+def _canonical_columns(cells, line: int, text: str, name: str, sep, hint: str = ""):
     """The project's own header: time_s, displacement_m, force_N (a unit suffix may differ:
-    force_mN), in any order, nothing else."""
+    force_mN), in any order, nothing else; ``hint`` is added to the unknown column's message."""
     found = {}
     for j, col in enumerate(cells, start=1):
         canon = _canonical(col)
         if canon is None:
-            hint = "" if sep == "," else f"; the file is separated by {_SEPARATOR_NAMES[sep]}"
+            sep_hint = "" if sep == "," else f"; the file is separated by {_SEPARATOR_NAMES[sep]}"
             raise TraceError(
                 f"{name}: line {line}, column {j}: unknown column {col!r} (expected "
-                f"{', '.join(COLUMNS)}{hint}; to read other columns or ignore extra ones, give "
-                "--columns time=...,displacement=...,force=...)"
+                f"{', '.join(COLUMNS)}{sep_hint}; to read other columns or ignore extra ones, give "
+                f"--columns time=...,displacement=...,force=...{hint})"
             )
         if canon[0] in found:
             raise TraceError(f"{name}: line {line}, column {j}: duplicate column {col!r}")
@@ -762,6 +782,7 @@ def parse_trace(text: str, name: str = "<string>", *, columns=None, units=None,
     order = sorted(range(3), key=lambda k: lay.use[k])  # cells read left to right
     values = array("d")
     row_lines = array("q")
+    widths = set()  # the rows' numbers of cells
     for lineno, raw in itertools.chain(pending, lines):
         line = raw.strip()
         if not line:
@@ -771,9 +792,11 @@ def parse_trace(text: str, name: str = "<string>", *, columns=None, units=None,
                 f"{name}: line {lineno}: '# key: value' lines must come before the header row"
             )
         cells = _split(line, lay.sep)
+        widths.add(len(cells))
         if len(cells) != lay.ncells if lay.exact else len(cells) < lay.ncells:
+            hint = _COMMA_HINT if lay.sep == "," and len(cells) > lay.ncells else ""
             raise TraceError(
-                f"{name}: line {lineno}: expected {lay.cells_text()}, got {len(cells)}"
+                f"{name}: line {lineno}: expected {lay.cells_text()}, got {len(cells)}{hint}"
             )
         row = [0.0, 0.0, 0.0]
         for k in order:
@@ -804,10 +827,11 @@ def parse_trace(text: str, name: str = "<string>", *, columns=None, units=None,
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
         k = bad[0] + 1
+        hint = _COMMA_HINT if lay.sep == "," and len(widths) > 1 else ""
         raise TraceError(
             f"{name}: line {row_lines[k]}, column {lay.use[0] + 1} ({lay.labels[0]}): time "
             f"{float(t[k])!r} is not greater than the previous row's {float(t[k - 1])!r} "
-            "(must increase)"
+            f"(must increase){hint}"
         )
     return _finish(name, lay, data)
 
@@ -825,6 +849,88 @@ def _decode(data: bytes, name: str) -> str:
             f"{name}: line {line}: not UTF-8 text (byte 0x{data[exc.start]:02x}); a binary file, "
             "or text in another encoding: save it as UTF-8 (CSV UTF-8)"
         ) from None
+
+
+def _check_size(size: int, name: str) -> None:
+    if size > MAX_FILE_BYTES:
+        raise TraceError(
+            f"{name}: the file is {size / 1e9:.3g} GB; traces over "
+            f"{MAX_FILE_BYTES / 1e9:.3g} GB are refused (decimate it)"
+        )
+
+
+def _zip_error(path, exc) -> TraceError:
+    return TraceError(f"{path}: a zip archive that cannot be read ({exc}): unzip it and give "
+                      "the file inside")
+
+
+#: JPK's file types, zip archives themselves (fitting._afm reads them).
+JPK_EXTENSIONS = (".jpk-force", ".jpk-force-map", ".jpk-qi-data", ".jpk-qi-series")
+#: What a zip archive can raise on reading: corrupt, truncated, encrypted, an unknown method.
+_ZIP_ERRORS = (zipfile.BadZipFile, EOFError, RuntimeError, NotImplementedError)
+
+
+def zip_export(path) -> str | None:
+    """The one file inside a zip archive (a zipped export): its name in the archive.
+
+    Args:
+        path: any file.
+
+    Returns:
+        None when ``path`` is not a zip archive, else the name of the only file in it (folders
+        and what macOS adds, ``__MACOSX/`` and ``.DS_Store``, do not count).
+
+    Raises:
+        TraceError: an archive that holds no file or several (they are named: unzip it and
+            give the one to read), or that cannot be read.
+    """
+    try:
+        if not zipfile.is_zipfile(path):
+            return None
+        with zipfile.ZipFile(path) as z:
+            names = [i.filename for i in z.infolist() if not i.is_dir()
+                     and not i.filename.startswith("__MACOSX/")
+                     and os.path.basename(i.filename) != ".DS_Store"]
+    except _ZIP_ERRORS as exc:
+        raise _zip_error(path, exc) from None
+    if os.fspath(path).lower().endswith(JPK_EXTENSIONS):  # JPK's own files are zip archives
+        raise TraceError(f"{path}: a JPK AFM file, not a trace file: read it with "
+                         "fitting.read_afm (lubjax-fit reads it as it is)")
+    if len(names) == 1:
+        return names[0]
+    if not names:
+        raise TraceError(f"{path}: a zip archive with no file in it")
+    shown = ", ".join(names[:4]) + (f", ... ({len(names)} files)" if len(names) > 4 else "")
+    raise TraceError(f"{path}: a zip archive holding {len(names)} files ({shown}): unzip it "
+                     "and give the file(s) to read")
+
+
+def zip_head(path, member: str, size: int = 4096) -> bytes:
+    """The first ``size`` bytes of ``member`` in the zip archive ``path`` (b"" if unreadable)."""
+    try:
+        with zipfile.ZipFile(path) as z, z.open(member) as fh:
+            return fh.read(size)
+    except (OSError, *_ZIP_ERRORS):
+        return b""
+
+
+@contextlib.contextmanager
+def unzipped(path):
+    """``(file, name)`` of a file to read: ``path`` itself, or for a zip archive holding one
+    file (:func:`zip_export`) that file, extracted into a temporary folder removed on exit,
+    and named ``path/member`` (in messages, and as a trace's name)."""
+    member = zip_export(path)
+    if member is None:
+        yield path, os.fspath(path)
+        return
+    with tempfile.TemporaryDirectory(prefix="lubjax-unzip-") as tmp:
+        try:
+            with zipfile.ZipFile(path) as z:
+                _check_size(z.getinfo(member).file_size, os.path.join(path, member))
+                file = z.extract(member, tmp)
+        except _ZIP_ERRORS as exc:
+            raise _zip_error(path, exc) from None
+        yield file, os.path.join(path, member)
 
 
 def _read_fast(path: str, opts: dict) -> Trace | None:
@@ -870,8 +976,9 @@ def read_trace(path, *, columns=None, units=None, force_sign: int = 1) -> Trace:
         Trace: the trace, in SI units (s, m, N).
 
     Raises:
-        TraceError: a folder, a file over ``MAX_FILE_BYTES``, a file that cannot be read, or
-            malformed contents (the message names the file, line and column); a ValueError.
+        TraceError: a folder, a file over ``MAX_FILE_BYTES``, a file that cannot be read, a zip
+            archive that does not hold exactly one file (one that does is read as that file),
+            or malformed contents (the message names the file, line and column); a ValueError.
 
     Example:
         ```python
@@ -886,12 +993,13 @@ def read_trace(path, *, columns=None, units=None, force_sign: int = 1) -> Trace:
     try:
         if os.path.isdir(path):
             raise TraceError(f"{path}: is a folder, not a trace file")
-        size = os.path.getsize(path)
-        if size > MAX_FILE_BYTES:
-            raise TraceError(
-                f"{path}: the file is {size / 1e9:.3g} GB; traces over "
-                f"{MAX_FILE_BYTES / 1e9:.3g} GB are refused (decimate it)"
-            )
+        _check_size(os.path.getsize(path), path)
+        member = zip_export(path)
+        if member is not None:  # a zipped export: read as the file inside
+            with unzipped(path) as (file, name):
+                with open(file, "rb") as fh:
+                    raw = fh.read()
+            return parse_trace(_decode(raw, name), name=name, **opts)
         trace = _read_fast(path, opts)
         if trace is None:  # something is wrong or unusual: the careful parser names it
             with open(path, "rb") as fh:

@@ -217,11 +217,11 @@ def _add_bounce_command(sub):
     b.add_argument("--mass", type=positive_float, help="sphere mass [kg]")
     b.add_argument("--density", type=positive_float, help="sphere density [kg/m³] (or --mass)")
     b.add_argument("--speed", type=positive_float, help="approach speed V [m/s]")
-    b.add_argument("--gap", type=float, help="initial gap x0 [m]")
+    b.add_argument("--gap", type=float, help="initial gap [m]")
     b.add_argument("--weight", type=float, default=0.0,
                    help="constant force toward the wall [N] (weight less buoyancy; default 0)")
     b.add_argument("--t-end", type=positive_float, default=None,
-                   help="end time [s] (default 20 x0/V)")
+                   help="end time [s] (default 20 --gap/--speed)")
     _add_substrate(b)
     _add_accuracy(b)
     return b
@@ -383,6 +383,33 @@ def _check_thin(name, value, radius):
         )
 
 
+def _check_end(t_end: float, given: str, time_scale: float | None = None, t_c: str = "",
+               fix=None) -> float:
+    """The end time t̄ (``t_end``, t_c units), refused beyond the solver's ``T_END_MAX`` in the
+    user's own units: ``given`` is what they typed ("--t-end 1e+12 s"), ``time_scale`` t_c [s]
+    in SI mode (None: dimensionless), ``t_c`` what t_c is, ``fix(limit_s)`` the fix in SI."""
+    from ._checks import T_END_MAX
+
+    if t_end <= T_END_MAX * (1 + 1e-12):  # the limit itself, as the user wrote it in seconds
+        return min(t_end, T_END_MAX)
+    if time_scale is None:
+        raise UsageError(f"{given}: the solver runs to t̄ = {T_END_MAX:g} at most (in t_c "
+                         f"units); give at most {T_END_MAX:g}")
+    limit_s = T_END_MAX * time_scale
+    raise UsageError(
+        f"{given} is t̄ = {t_end:.4g} (t_c = {t_c} = {time_scale:.4g} s); the solver runs to "
+        f"t̄ = {T_END_MAX:g} at most, {limit_s:.4g} s here: {fix(limit_s)}"
+    )
+
+
+def _at_most(x: float) -> str:
+    """``x`` to 4 significant digits, rounded down (a limit to quote: never above it)."""
+    y = float(f"{x:.4g}")
+    if y > x * (1 + 1e-12):
+        y -= 10.0 ** (math.floor(math.log10(x)) - 3)
+    return f"{y:.4g}"
+
+
 def _settings(args):
     from ._solve import Settings
 
@@ -454,13 +481,18 @@ def _creep(args) -> int:
             raise UsageError(f"{args.load_csv}: the load must rise from its first row")
         test = CreepTest(e_star, args.radius, args.viscosity, load, ramp, args.gap)
         history = SampledTravel((ts - ts[0]) / ramp, fs / load)
-        t_end = (ts[-1] - ts[0]) / ramp
+        t_end = _check_end((ts[-1] - ts[0]) / ramp, f"{args.load_csv}: the load history",
+                           ramp, "the time to the peak load",
+                           lambda limit: f"give a history at most {_at_most(limit)} s long")
     else:
         _require(args, ["load", "ramp-time", "hold"])
         if not (math.isfinite(args.hold) and args.hold >= 0):
             raise UsageError(f"--hold must be >= 0 s, got {args.hold}")
         test = CreepTest(e_star, args.radius, args.viscosity, args.load, args.ramp_time, args.gap)
-        t_end = (args.ramp_time + args.hold) / args.ramp_time
+        ramp = args.ramp_time
+        t_end = _check_end((ramp + args.hold) / ramp,
+                           f"--ramp-time + --hold = {ramp + args.hold:g} s", ramp, "--ramp-time",
+                           lambda limit: f"give --hold <= {_at_most(limit - ramp)} s")
     _check_thin("--gap", test.gap, test.radius)
     _check_thin("the Hertz indentation under the load", test.indent, test.radius)
     check_parameters(test.beta, test.z0_bar)
@@ -508,7 +540,9 @@ def _bounce(args) -> int:
     test = Collision(e_star, args.radius, args.viscosity, mass, args.speed, args.gap, args.weight)
     _check_thin("--gap", test.gap, test.radius)
     check_parameters(test.beta, 1.0)
-    t_end = 20.0 if args.t_end is None else args.t_end / test.time_scale
+    t_end = 20.0 if args.t_end is None else _check_end(
+        args.t_end / test.time_scale, f"--t-end {args.t_end:g} s", test.time_scale,
+        "--gap/--speed", lambda limit: f"give --t-end <= {_at_most(limit)} s")
     settings = _settings(args)
     # d_c = the gap x0, t_c = x0/V
     substrate, record, line = _substrate(args, settings, (test.radius, test.gap, test.time_scale))
@@ -537,7 +571,7 @@ def _bounce(args) -> int:
         velocity=res.velocity.tolist(),
         velocity_m_s=(res.velocity * v).tolist(),
         restitution=None if math.isnan(e) else e,
-        restitution_read_at="the starting gap x0, moving away",
+        restitution_read_at="the starting gap (--gap), moving away",
         stokes=test.stokes,
         elasticity_davis=test.elasticity,
         mass_kg=mass,
@@ -565,7 +599,7 @@ def bounce_summary(res, test, e) -> str:
         f"{res.t[peak] * ts:.4g} s; minimum film thickness {res.film_min[thin] * x0 * 1e6:.4g} um "
         f"at t = {res.t[thin] * ts:.4g} s; lowest sphere position (rigid body) z = "
         f"{res.gap[low] * x0 * 1e6:.4g} um at t = {res.t[low] * ts:.4g} s{indent}; restitution "
-        + ("none (no rebound to x0)" if math.isnan(e) else f"{e:.4f}")
+        + ("none (no rebound to the starting --gap)" if math.isnan(e) else f"{e:.4f}")
         + f"; {res.accepted} steps, run {res.run_s:.3f} s, compile {res.compile_s:.2f} s"
     )
 
@@ -660,8 +694,12 @@ def _relax(args) -> int:
     check_parameters(beta, z0)  # the solver's valid ranges, before anything is compiled
     if args.t_end is None:
         t_end = 5.0
+    elif test:
+        t_end = _check_end(args.t_end / test.time_scale, f"--t-end {args.t_end:g} s",
+                           test.time_scale, "--indent/--speed",
+                           lambda limit: f"give --t-end <= {_at_most(limit)} s")
     else:
-        t_end = args.t_end / test.time_scale if test else args.t_end
+        t_end = _check_end(args.t_end, f"--t-end {args.t_end:g}")
     if not (math.isfinite(t_end) and t_end > 0):
         raise UsageError(f"--t-end must be > 0, got {args.t_end}")
     given = accuracy_settings(args) | ({"dr": args.dr} if args.dr is not None else {})

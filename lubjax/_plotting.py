@@ -38,10 +38,11 @@ def plot_result(res, path: str, test=None, substrate: str | None = None) -> None
     load = (t > 0.02) & (t < 1) & (res.z0 - t > 0.05)
     ax[0].plot(
         t[load] * ts, rigid_squeeze_force(res.z0 - t[load], -1.0, res.beta) * fs, "b:",
-        label="rigid squeeze (eq 12b)",
+        label="rigid sphere squeezing the film (short-time limit)",
     )
     if res.z0 < 1:
-        ax[0].axhline(hertz_force(res.z0) * fs, color="r", ls="--", label="Hertz (eq 16)")
+        ax[0].axhline(hertz_force(res.z0) * fs, color="r", ls="--",
+                      label="Hertz contact (long-time limit)")
     ax[0].set_ylim(0, 1.15 * np.nanmax(res.force) * fs)
     ax[0].set_ylabel(f_label)
     ax[0].legend(fontsize=8)
@@ -70,10 +71,11 @@ def plot_result(res, path: str, test=None, substrate: str | None = None) -> None
         a.set_xlabel(r_label)
     where = f"substrate: {substrate or HALF_SPACE}"
     if si:
-        title = (f"relax: travel ramped at v0 = {test.speed:.3g} m/s to d_c = {test.indent:.3g} m, "
-                 f"then held; {where}\nE* = {test.E_star:.3g} Pa, η = {test.viscosity:.3g} Pa s,"
-                 f" R = {test.radius:.3g} m, z0 = {test.gap:.3g} m  (t_c = "
-                 f"{test.time_scale:.3g} s, F scale = {test.force_scale:.3g} N)")
+        title = (f"relax: travel ramped at --speed {test.speed:.3g} m/s to --indent "
+                 f"{test.indent:.3g} m, then held; {where}\nE* = {test.E_star:.3g} Pa, "
+                 f"--viscosity {test.viscosity:.3g} Pa s, --radius {test.radius:.3g} m, --gap "
+                 f"{test.gap:.3g} m  (t_c = indent/speed = {test.time_scale:.3g} s, F scale = "
+                 f"{test.force_scale:.3g} N)")
     else:
         title = (f"relax: travel ramped to d_c at t̄ = 1, then held; {where}\n(lengths in d_c, "
                  "times in t_c = d_c/v0)")
@@ -102,8 +104,8 @@ def plot_drive(res, path: str, kind: str, test, substrate: str | None = None,
         ax[0].set_ylabel("approach [μm]")
         ax[1].plot(t, res.force * fs * 1e3, "k-", label="load")
         ax[1].set_ylabel("force [mN]")
-        title = (f"creep: F = {test.load:.3g} N, E* = {test.E_star:.3g} Pa, "
-                 f"η = {test.viscosity:.3g} Pa s, R = {test.radius:.3g} m, z0 = {test.gap:.3g} m"
+        title = (f"creep: load {test.load:.3g} N, E* = {test.E_star:.3g} Pa, --viscosity "
+                 f"{test.viscosity:.3g} Pa s, --radius {test.radius:.3g} m, --gap {test.gap:.3g} m"
                  f"  (β = {test.beta:.3g}, z̄0 = {test.z0_bar:.3g})")
     else:
         ax[0].plot(t, res.gap * d * 1e6, "k-", label="sphere position z (rigid body)")
@@ -114,8 +116,10 @@ def plot_drive(res, path: str, kind: str, test, substrate: str | None = None,
         twin = ax[1].twinx()
         twin.plot(t, res.force * fs * 1e3, "k-", lw=0.8)
         twin.set_ylabel("film force [mN] (black)")
-        title = (f"bounce: St = {test.stokes:.3g}, β = {test.beta:.3g}, m = {test.mass:.3g} kg,"
-                 f" V = {test.speed:.3g} m/s, x0 = {test.gap:.3g} m")
+        title = (f"bounce: a sphere of mass {test.mass:.3g} kg at --speed {test.speed:.3g} m/s "
+                 f"from --gap {test.gap:.3g} m; E* = {test.E_star:.3g} Pa, --viscosity "
+                 f"{test.viscosity:.3g} Pa s, --radius {test.radius:.3g} m  (Stokes number "
+                 f"{test.stokes:.3g}, β = {test.beta:.3g})")
     for a in ax[:3]:
         a.set_xlabel("t [s]")
     if kind == "creep":

@@ -158,6 +158,30 @@ def test_chiaro_radius_and_vendor_modulus_from_the_file(data_dir):
     assert "approach_cut_m" in tr.metadata
 
 
+def test_zipped_chiaro_export_is_read_as_the_file_inside(data_dir):
+    """afmformats ships the Chiaro export zipped, as a user may get it: the archive is read as
+    the one file in it (radius and vendor E from its header), named archive/file."""
+    zipped = _vendor(data_dir, "fmt-chiaro-txt_AEBP1_Indentation_002.zip")
+    inside = _vendor(data_dir, "fmt-chiaro-txt_AEBP1_Indentation_002.txt")
+    assert _afm.is_afm_file(zipped)
+    (tr,) = _afm.read_afm(zipped, max_samples=300)
+    (ref,) = _afm.read_afm(inside, max_samples=300)
+    assert tr.name == f"{zipped}/{inside.name}"
+    assert tr.radius == ref.radius and tr.metadata["vendor_E_star_Pa"] == "156.009"
+    for a, b in zip(tr[:3], ref[:3]):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_zip_of_several_exports_names_them(data_dir, capsys):
+    zipped = _vendor(data_dir, "fmt-afm-workshop-fd_mapping_16_2018-08-01_13.07.zip")
+    assert not _afm.is_afm_file(zipped)
+    assert main([str(zipped), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert (f"{zipped}: a zip archive holding 16 files "
+            "(AFM-workshop_FD_mapping_16_2018-08-01_13.07.00.csv, ") in err
+    assert "... (16 files)): unzip it and give the file(s) to read" in err
+
+
 def test_stress_relaxation_dwell_is_kept_at_constant_height(data_dir):
     """JPK stress relaxation: approach (1 s) then a 30 s constant-height dwell; the stage is
     the closed-loop height, so it holds still over the dwell while the force relaxes."""

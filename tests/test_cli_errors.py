@@ -30,6 +30,7 @@ from fitting._fit import FitResult, Start
 from fitting._io import TraceError, parse_trace, read_trace
 from fitting._model import ModelSpec, Scales
 from lubjax import _files
+from lubjax._checks import T_END_MAX
 
 from helpers import ROOT
 from helpers import SEED_TRACE as SEED
@@ -124,6 +125,12 @@ RELAX_USAGE = [
     (DIM + ["--dr", "-0.01"], "argument --dr: must be a finite number > 0"),
     (DIM + ["--t-end", "0"], "argument --t-end: must be a finite number > 0"),
     (DIM + ["--t-end", "-1e3"], "argument --t-end: must be a finite number > 0"),
+    # beyond the solver's longest run: in the units the user gave (s in SI mode, t_c = 1.4 s)
+    (DIM + ["--t-end", "1e12"], "--t-end 1e+12: the solver runs to t̄ = 1e+09 at most (in t_c "
+     "units); give at most 1e+09"),
+    (["relax"] + SI + ["--t-end", "1e12"], "--t-end 1e+12 s is t̄ = 7.143e+11 (t_c = "
+     "--indent/--speed = 1.4 s); the solver runs to t̄ = 1e+09 at most, 1.4e+09 s here: give "
+     "--t-end <= 1.4e+09 s"),
     (["relax"] + SI + ["--poisson", "0.6"], "give either --E-star or --E with --poisson"),
     (["relax"] + SI[:1] + ["-3.92e6"] + SI[2:], "E_star must be finite and > 0"),
     (["relax"] + SI[:1] + ["-3.92E+06"] + SI[2:], "E_star must be finite and > 0"),
@@ -294,6 +301,16 @@ def _recording_relax(monkeypatch):
 
     monkeypatch.setattr(lsolve, "relax", fake)
     return seen
+
+
+def test_relax_runs_to_the_longest_end_time_it_quotes(monkeypatch, capsys):
+    """The limit an SI --t-end is refused with, given back, runs (to t̄ = T_END_MAX)."""
+    assert lcli.main(["relax"] + SI + ["--t-end", "1e12"]) == 2
+    limit = _one_line_error(capsys.readouterr().err, "lubjax").rsplit("--t-end <= ", 1)[1]
+    seen = []
+    monkeypatch.setattr(lsolve, "relax", lambda *a, **k: seen.append(a[2]) or _fake_result())
+    assert lcli.main(["relax"] + SI + ["--t-end", limit.removesuffix(" s")]) == 0
+    assert 0.999 * T_END_MAX <= seen[0] <= T_END_MAX
 
 
 def test_relax_passes_the_layer_to_the_solver(tmp_path, monkeypatch, capsys):

@@ -85,6 +85,12 @@ def test_bounce_cli_reports_restitution(tmp_path):
           "--gap", "1e-4"], "either --mass or --density"),
         (["bounce", *MATERIAL, "--mass", "1e-3", "--speed", "0.1", "--gap", "1e-4",
           "--weight", "-1"], "--weight must be >= 0"),
+        # beyond the solver's longest run, said in seconds
+        ([*CREEP[:-4], "--hold", "1e10", "--gap", "140e-6"], "--ramp-time + --hold = 1e+10 s "
+         "is t̄ = 1e+10 (t_c = --ramp-time = 1 s); the solver runs to t̄ = 1e+09 at most, "
+         "1e+09 s here: give --hold <= 9.999e+08 s"),
+        ([*BOUNCE, "--t-end", "1e8"], "--t-end 1e+08 s is t̄ = 1e+11 (t_c = --gap/--speed = "
+         "0.001 s); the solver runs to t̄ = 1e+09 at most, 1e+06 s here: give --t-end <= 1e+06 s"),
         (["bounce", "--viscosity", "1", "--radius", "2e-3", "--mass", "1e-3", "--speed", "0.1",
           "--gap", "1e-4"], "--E-star"),
         # the substrate options (shared with relax, issue 10 item 5)

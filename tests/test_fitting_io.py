@@ -2,6 +2,7 @@
 
 import glob
 import os
+import zipfile
 
 import numpy as np
 import pytest
@@ -151,3 +152,73 @@ def test_model_header_keys_are_checked(header, match):
 def test_model_header_keys_are_kept():
     tr = parse_trace(_text(header="# radius_m: 2e-3\n# drive: force\n# stiffness_N_m: 5e3\n"))
     assert tr.metadata["drive"] == "force" and tr.meta_float("stiffness_N_m") == 5e3
+
+
+@pytest.mark.parametrize("text, what", [("", "is empty"),
+                                        (" \n\n\t\r\n", "holds only blank lines")])
+def test_an_empty_file_says_so(text, what, tmp_path):
+    message = f"the file {what}: no header row, no data"
+    with pytest.raises(ValueError, match=f"^bad.csv: {message}$"):
+        parse_trace(text, name="bad.csv")
+    p = tmp_path / "bad.csv"
+    p.write_text(text)
+    with pytest.raises(ValueError, match=f"^{p}: {message}$"):
+        read_trace(p)
+
+
+def _zip(path, files: dict):
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
+        for name, data in files.items():
+            z.writestr(name, data)
+    return path
+
+
+def test_a_zipped_trace_is_read_as_the_file_inside(tmp_path):
+    """A zipped export (a folder in it and macOS's additions do not count) reads as its file."""
+    seed = os.path.join(DATA, "paper_dc140.csv")
+    text = open(seed, encoding="utf-8").read()
+    z = _zip(tmp_path / "export.zip", {"run/": b"", "run/trace.csv": text,
+                                        "__MACOSX/run/._trace.csv": b"\x00\x05\x16\x07",
+                                        "run/.DS_Store": b"\x00\x00\x00\x01Bud1"})
+    tr, ref = read_trace(z), read_trace(seed)
+    assert tr.name == f"{z}/run/trace.csv"
+    for a, b in zip(tr[:3], ref[:3]):
+        np.testing.assert_array_equal(a, b)
+    assert tr.radius == ref.radius and tr.metadata == ref.metadata
+
+
+def test_a_zip_that_is_not_one_export_is_refused_naming_what_it_holds(tmp_path):
+    rows = _text()
+    many = {f"curve{k}.csv": rows for k in range(6)}
+    with pytest.raises(ValueError, match=r"a zip archive holding 2 files \(a\.csv, b\.csv\): "
+                       r"unzip it and give the file\(s\) to read$"):
+        read_trace(_zip(tmp_path / "two.zip", {"a.csv": rows, "b.csv": rows}))
+    with pytest.raises(ValueError, match=r"holding 6 files \(curve0\.csv, curve1\.csv, "
+                       r"curve2\.csv, curve3\.csv, \.\.\. \(6 files\)\)"):
+        read_trace(_zip(tmp_path / "six.zip", many))
+    with pytest.raises(ValueError, match=r"cell\.jpk-force: a JPK AFM file, not a trace file: "
+                       r"read it with fitting\.read_afm"):
+        read_trace(_zip(tmp_path / "cell.jpk-force", {"header.properties": "", "segments/": ""}))
+    with pytest.raises(ValueError, match=r"none\.zip: a zip archive with no file in it$"):
+        read_trace(_zip(tmp_path / "none.zip", {"folder/": b""}))
+    # a member whose bytes do not match its checksum
+    bad = tmp_path / "bad.zip"
+    with zipfile.ZipFile(bad, "w", zipfile.ZIP_STORED) as z:
+        z.writestr("t.csv", rows)
+    raw = bytearray(bad.read_bytes())
+    at = raw.index(rows[:20].encode())
+    raw[at] ^= 1
+    bad.write_bytes(bytes(raw))
+    with pytest.raises(ValueError, match=r"bad\.zip: a zip archive that cannot be read \(Bad "
+                       r"CRC-32 .*\): unzip it"):
+        read_trace(bad)
+
+
+def test_a_zipped_vendor_export_is_an_afm_file(tmp_path):
+    """lubjax-fit sends a zip to afmformats when the one file in it is a vendor export."""
+    from fitting._afm import is_afm_file
+
+    assert is_afm_file(_zip(tmp_path / "c.zip", {"c.txt": "# Optics11 Chiaro export\n"}))
+    assert is_afm_file(_zip(tmp_path / "j.zip", {"cell.jpk-force": b"PK\x03\x04"}))
+    assert not is_afm_file(_zip(tmp_path / "t.zip", {"t.txt": _text()}))
+    assert not is_afm_file(_zip(tmp_path / "two.zip", {"a.jpk-force": "", "b.jpk-force": ""}))

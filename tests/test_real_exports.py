@@ -173,6 +173,39 @@ def test_refusals_name_the_cause(text, kw, match):
         parse_trace(text, name="x.csv", **kw)
 
 
+COMMA_HINT = (r"decimal commas\? With ',' as the separator a decimal comma splits a number in "
+              r"two cells: export with ';' \(or tabs\) as the separator, or with decimal points")
+
+
+@pytest.mark.parametrize("header, kw, match", [
+    # the project's header: a row splits into more cells than it has
+    (("time_s", "displacement_m", "force_N"), {},
+     r"line 3: expected 3 cells \(time_s, displacement_m, force_N\) separated by ',', got 4; "),
+    # a vendor's header, not mapped: --columns is the advice, with the hint
+    (("Time (s)", "Piezo (nm)", "Load (uN)"), {}, r"line 2, column 1: unknown column 'Time \(s\)'"),
+    # mapped by number: the cells are read, and the time (split at its comma) does not increase
+    (("Time (s)", "Piezo (nm)", "Load (uN)"), dict(columns="time=1,displacement=2,force=3"),
+     r"line 4, column 1 \(time, column 1\): time 0.0 is not greater than the previous row's 0.0 "
+     r"\(must increase\); "),
+    # no header row
+    (None, {}, r"no header row .*--columns time=1,displacement=2,force=3; "),
+])
+def test_decimal_commas_with_a_comma_separator_are_named(header, kw, match):
+    text = _export(",", comma=True, header=header)
+    with pytest.raises(TraceError, match=f"^x.csv: {match}.*{COMMA_HINT}"):
+        parse_trace(text, name="x.csv", **kw)
+    # like mistakes with decimal points (a cell missing, a time repeated) get no such hint
+    lines = _export(",", header=header).splitlines(keepends=True)
+    start = 1 if header is None else 2
+    if header == ("time_s", "displacement_m", "force_N"):
+        lines[start] = lines[start].rsplit(",", 1)[0] + "\n"
+    elif "columns" in kw:
+        lines[start + 1] = lines[start]
+    with pytest.raises(TraceError) as info:
+        parse_trace("".join(lines), name="x.csv", **kw)
+    assert "decimal" not in str(info.value)
+
+
 def test_malformed_value_in_an_export_names_line_and_column(tmp_path):
     text = _export(";", comma=True, header=("Time (s)", "Piezo (nm)", "Load (uN)"),
                    scale=(1.0, 1e9, 1e6))
