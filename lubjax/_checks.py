@@ -40,6 +40,26 @@ def is_traced(value) -> bool:
     return isinstance(value, jax.core.Tracer)
 
 
+def concrete(tree):
+    """The value of a tree of numbers where it is known now, or None.
+
+    Outside ``jit`` and ``vmap`` a value being differentiated (``jvp``, ``grad``) still has a
+    known primal: each leaf comes back as a NumPy array of it, the derivative stripped. Under
+    ``jit`` or ``vmap`` nothing is known until the program runs: None."""
+    def value(x):
+        return np.asarray(jax.lax.stop_gradient(x)) if is_traced(x) else x
+
+    try:
+        return jax.tree_util.tree_map(value, tree)
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        return None
+
+
+def any_traced(tree) -> bool:
+    """Whether any leaf of ``tree`` is a JAX tracer."""
+    return any(is_traced(x) for x in jax.tree_util.tree_leaves(tree))
+
+
 def _is_real(value) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 

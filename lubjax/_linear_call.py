@@ -3,7 +3,7 @@
 :func:`lubjax._rollout.rollout` takes its derivatives through ``linear_call`` (a linear map with
 its own transpose: the forward replay and the checkpointed adjoint). Under ``vmap`` of a
 derivative the call meets batched inputs; this rule maps the callee and its transpose over the
-batch axis (every input brought to the front, every output batched there).
+batch axis (batched inputs brought to the front, every output batched there).
 """
 
 from __future__ import annotations
@@ -17,10 +17,13 @@ linear_call = jax.custom_derivatives.linear_call
 
 
 def _batched(axis_data, args, dims, *, callee, transpose_thunk, num_callee_consts, num_res):
-    size = axis_data.size
-    args = [batching.bdim_at_front(a, d, size) for a, d in zip(args, dims)]
     n_fixed = num_callee_consts + num_res
-    batched_callee = jax.make_jaxpr(jax.vmap(core.jaxpr_as_fun(callee)))(*args)
+    # Inputs the batch does not vary stay unbatched: the replay's values are then computed once,
+    # exactly as in the unbatched call (a batched LU rounds differently, and near dry the
+    # derivatives are sensitive to the values at rounding level).
+    in_axes = [None if d is None else 0 for d in dims]
+    args = [a if d is None else jax.numpy.moveaxis(a, d, 0) for a, d in zip(args, dims)]
+    batched_callee = jax.make_jaxpr(jax.vmap(core.jaxpr_as_fun(callee), in_axes=in_axes))(*args)
 
     def batched_transpose():
         transpose, consts = transpose_thunk()
@@ -28,9 +31,11 @@ def _batched(axis_data, args, dims, *, callee, transpose_thunk, num_callee_const
         def run(*a):
             return core.jaxpr_as_fun(transpose)(*consts, *a)
 
+        size = axis_data.size
         cotangents = [jax.ShapeDtypeStruct((size, *a.shape), a.dtype) for a in callee.out_avals]
         fixed = [jax.ShapeDtypeStruct(a.shape, a.dtype) for a in args[:n_fixed]]
-        return jax.make_jaxpr(jax.vmap(run))(*fixed, *cotangents), ()
+        axes = in_axes[:n_fixed] + [0] * len(cotangents)
+        return jax.make_jaxpr(jax.vmap(run, in_axes=axes))(*fixed, *cotangents), ()
 
     out = linear_call_p.bind(*args, callee=batched_callee, transpose_thunk=batched_transpose,
                              num_callee_consts=0, num_res=n_fixed)

@@ -14,6 +14,7 @@ import numpy as np
 from . import _compiler
 from ._checks import (
     FILM_ERRORS,
+    any_traced,
     check_auto_none_or_below,
     check_choice,
     check_int_at_least,
@@ -22,12 +23,14 @@ from ._checks import (
     check_positive_or_none,
     check_t_end,
     check_times,
+    concrete,
 )
 from ._controller import DEFAULT_TOLERANCE, DONE, Tolerance, stop_reason
 from ._discretisation import Discretisation, discretise
 from ._drives import as_drive
 from ._indenter import RampHold, SampledTravel
 from ._mesh import Mesh, graded_mesh, mesh_for, mesh_from_tolerance
+from ._pytree import register
 from ._rollout import Step, evaluate, evaluate_host, rollout
 from ._substrate import HalfSpace, as_substrate
 from ._threads import single_threaded_blas
@@ -384,7 +387,9 @@ def _check_x64():
 
 @dataclasses.dataclass(frozen=True)
 class Result:
-    """A relaxation run (dimensionless). Arrays are numpy.
+    """A relaxation run (dimensionless). Arrays are numpy; where a derivative is taken through
+    :func:`relax`, the series and profiles are JAX arrays carrying it, and under ``jit`` or
+    ``vmap`` every field is traced and the series are the loop's entries (``relax``).
 
     The per-step series are at the accepted step times ``t``; read any of them at other
     times with :meth:`at` (the stepper's interpolant).
@@ -476,15 +481,21 @@ class Result:
                 "gap", "velocity", "elastic_energy" or "dissipation".
 
         Returns:
-            The series at ``times`` (a 1-D float64 array, in the series' units).
+            The series at ``times`` (a 1-D float64 array, in the series' units; a JAX array
+            carrying the derivative where one is taken).
 
         Raises:
             ValueError: an unknown ``field``, or ``times`` not finite or outside the run.
         """
         if field not in _SERIES[1:]:
             raise ValueError(f"field must be one of {', '.join(_SERIES[1:])}; got {field!r}")
-        times = check_times(times, "times", float(self.t[0]), self.t_end)
-        return evaluate_host(self.steps, times, field)
+        if not any_traced(self.steps):
+            times = check_times(times, "times", float(self.t[0]), self.t_end)
+            return evaluate_host(self.steps, times, field)
+        span = concrete((self.steps.t[0], self.t_end))
+        if span is not None:
+            times = check_times(times, "times", float(span[0]), float(span[1]))
+        return evaluate(self.steps, jnp.asarray(times, jnp.float64), field)
 
     def problems(self) -> list[str]:
         """What is wrong with the run, in words (empty when :attr:`ok`).
@@ -532,6 +543,9 @@ class Result:
             "thin films to rtol of themselves"
         )
 
+
+register(Result, data=tuple(f.name for f in dataclasses.fields(Result)
+                           if f.name != "stop_reason"), static=("stop_reason",))
 
 _COMPILED: dict = {}
 _ESTIMATED = ("force", "gap", "film_center", "film_min")
@@ -582,8 +596,19 @@ def relax(
     profile_times=(),
     check: str = "raise",
     progress=None,
+    mesh: Mesh | None = None,
 ) -> Result:
     """Simulate a relaxation test (paper eqs 8, 11b) in dimensionless form, error-controlled.
+
+    A JAX function: ``jax.grad``, ``jacfwd``, ``jvp`` and ``vjp`` act on it directly (in β,
+    z̄0 and the drive's and substrate's numbers; the step times, and so ``t_end``, carry no
+    derivative), and so do ``jit`` and ``vmap``. Where the values are known (no ``jit`` or
+    ``vmap`` around it) the run is checked and refined as always and its :class:`Result`
+    holds the accepted steps, its arrays traced where a derivative is taken. Under ``jit`` or
+    ``vmap`` nothing is known until the program runs: the mesh is ``mesh`` or the shared
+    ``settings.mesh()`` (no per-run refinement, as :func:`make_plan`), the error estimate is
+    not made, ``check`` acts as "flag", and the per-step series are the loop's entries padded
+    to ``Settings.max_steps + 1`` (read them with :meth:`Result.at`).
 
     Args:
         beta: β (eq 8e), in [1e-4, 1e9].
@@ -605,6 +630,7 @@ def relax(
         progress: None (quiet, the default), or a callable told each phase as it starts
             ("compiling the solver", "running the solver", "estimating the error"): the
             command line's progress line shows it.
+        mesh: the mesh to run on (default: :func:`lubjax.mesh_for`, the one the run needs).
 
     Returns:
         Result: F̄, the gap and min h̄ at every accepted step, the profiles at
@@ -618,47 +644,63 @@ def relax(
 
     Example:
         ```python
+        import jax
         import lubjax
 
         res = lubjax.relax(100.0, 0.5, t_end=2.0, profile_times=[1.0],
                            settings=lubjax.Settings(rtol=1e-3, error_estimate=False))
         assert res.ok and res.film.shape == (1, res.r.size)
         f_end = res.force[-1]  # F̄ at t̄ = 2, during the hold
+        # and its sensitivity to z̄0, through relax itself
+        slope = jax.grad(lambda z: lubjax.relax(100.0, z, 2.0).at(2.0)[0])(0.5)
         ```
     """
     _check_x64()
-    check_parameters(beta, z0)
     check_choice("check", check, ("raise", "warn", "flag"))
     history = _drive_of(history, drive)
     settings = Settings() if settings is None else settings
-    t_start = float(history.t_start)
-    t_end = check_t_end(t_end, t_start)
-    ptimes = check_times(profile_times, "profile_times", t_start, t_end)
-    mesh = mesh_for(settings, drive=history, beta=beta, z0=z0, t_end=t_end)
     substrate = as_substrate(substrate)
-    disc = discretise(mesh, substrate)
+    known = concrete((beta, z0, t_end, history, substrate))
+    if known is None:
+        return _relax_traced(beta, z0, t_end, history, substrate, settings, profile_times, mesh)
+    beta_v, z0_v, t_end_v, history_v, substrate_v = known
+    check_parameters(beta_v, z0_v)
+    t_start = float(history_v.t_start)
+    t_end_v = check_t_end(t_end_v, t_start)
+    ptimes = check_times(profile_times, "profile_times", t_start, t_end_v)
+    if mesh is None:
+        mesh = mesh_for(settings, drive=history_v, beta=beta_v, z0=z0_v, t_end=t_end_v)
+    disc = discretise(mesh, substrate_v)
     tol = settings.tolerance()
     runs = [(disc, tol, ptimes)]
     if settings.error_estimate:
-        coarse = discretise(mesh.coarsened(), substrate)
+        coarse = discretise(mesh.coarsened(), substrate_v)
         loose = dataclasses.replace(tol, rtol=min(8 * tol.rtol, 0.1))
         runs += [(coarse, tol, ptimes[:0]), (coarse, loose, ptimes[:0])]
+    # With a derivative to take, the run itself goes through jit with its inputs' derivatives
+    # attached; the error estimate's runs are not differentiated.
+    differentiated = any_traced((beta, z0, history, substrate))
     report = progress if progress is not None else (lambda phase: None)
     report("compiling the solver")
-    compiled, compile_s = _compiled_rollouts(runs, history, substrate)
+    compiled, compile_s = _compiled_rollouts(runs[differentiated:], history_v, substrate_v)
     report("running the solver")
     start = time.perf_counter()
     with single_threaded_blas():
         trajs = [
-            jax.block_until_ready(fn(d, float(beta), float(z0), history, substrate, t_end, pt, t))
-            for fn, (d, t, pt) in zip(compiled, runs)
+            jax.block_until_ready(
+                fn(d, float(beta_v), float(z0_v), history_v, substrate_v, t_end_v, pt, t))
+            for fn, (d, t, pt) in zip(compiled, runs[differentiated:])
         ]
+        if differentiated:
+            trajs.insert(0, _differentiable_rollout(disc, beta, z0, history, substrate, t_end_v,
+                                                    ptimes, tol))
     run_s = time.perf_counter() - start
     if settings.error_estimate:
         report("estimating the error")
-    result = _result_of(trajs, disc, beta, z0, t_end, ptimes, tol.max_steps, compile_s, run_s)
+    result = _result_of(trajs, disc, beta_v, z0_v, t_end_v, ptimes, tol.max_steps, compile_s,
+                        run_s)
     if not result.ok and check != "flag":
-        msg = f"relax(beta={beta}, z0={z0}): " + "; ".join(result.problems())
+        msg = f"relax(beta={beta_v}, z0={z0_v}): " + "; ".join(result.problems())
         if check == "raise":
             raise SolverError(msg)
         warnings.warn(msg, RuntimeWarning, stacklevel=2)
@@ -667,12 +709,48 @@ def relax(
     if stopped and result.ok and check != "flag":
         # the run is sound, its error bars are not: NaN after the coarse runs stopped
         warnings.warn(
-            f"relax(beta={beta}, z0={z0}): the error estimate's coarse runs stopped at "
+            f"relax(beta={beta_v}, z0={z0_v}): the error estimate's coarse runs stopped at "
             f"t̄ = {stopped[0][0]:.4g} ({stop_reason(stopped[0][1], tol.max_steps).split(';')[0]}): "
             "force_error and the other estimated errors are NaN after it; raise "
             "Settings.max_steps",
             RuntimeWarning, stacklevel=2)
     return result
+
+
+#: relax's run with derivatives to take (jit caches its programs per mesh size and drive).
+_differentiable_rollout = jax.jit(_forward_rollout)
+
+
+def _relax_traced(beta, z0, t_end, history, substrate, settings, profile_times, mesh) -> Result:
+    """:func:`relax` under ``jit`` or ``vmap``: one run on ``mesh`` (or the shared mesh), its
+    entries as the loop left them, its flags traced."""
+    times = np.atleast_1d(np.asarray(profile_times, np.float64))
+    if times.ndim != 1 or not np.all(np.isfinite(times)):
+        raise ValueError(f"profile_times must be a 1-D sequence of finite numbers, got {times}")
+    mesh = settings.mesh() if mesh is None else mesh
+    disc = discretise(mesh, substrate)
+    traj = _forward_rollout(disc, beta, z0, history, substrate, t_end, times,
+                            settings.tolerance())
+    steps = traj.steps
+    series = {k: getattr(steps, k) for k in _SERIES}
+    kept = steps.accepted & jnp.isfinite(steps.t)
+    nan = jnp.full_like(steps.force, jnp.nan)
+    return Result(
+        beta=beta, z0=z0, t_end=t_end, **series, r=np.asarray(disc.r), profile_times=times,
+        pressure=traj.profiles, displacement=_displacement_of(disc, traj), film=traj.profile_films,
+        finite=(jnp.all(jnp.isfinite(jnp.where(kept, steps.force, 0.0)))
+                & jnp.all(jnp.isfinite(traj.profiles))),
+        film_positive=jnp.all(jnp.where(kept, steps.film_min > 0, True)),
+        finished=traj.status == DONE, stop_reason="",
+        **{f"{f}_error": nan for f in _ESTIMATED},
+        accepted=traj.accepted, rejected=traj.rejected, compile_s=0.0, run_s=0.0, steps=steps,
+    )
+
+
+def _displacement_of(disc, traj):
+    """w̄ = -Ŵū at the profile times, from h̄ = z̄ + r̄²/2 - w̄ (ū ≠ p̄ on a viscoelastic
+    substrate)."""
+    return traj.profile_gaps[:, None] + 0.5 * np.asarray(disc.r) ** 2 - traj.profile_films
 
 
 def _errors_of(series, trajs) -> dict:
@@ -692,18 +770,18 @@ def _errors_of(series, trajs) -> dict:
 
 
 def _result_of(trajs, disc, beta, z0, t_end, ptimes, max_steps, compile_s, run_s) -> Result:
-    """The :class:`Result` of a run (``trajs[0]``) and its error estimate's runs."""
+    """The :class:`Result` of a run (``trajs[0]``, whose arrays may carry derivatives) and its
+    error estimate's runs."""
     traj = trajs[0]
-    steps = traj.steps
-    keep = np.asarray(steps.accepted)
-    series = {k: np.asarray(getattr(steps, k))[keep] for k in _SERIES}
-    p = np.asarray(traj.profiles)
-    z = np.asarray(traj.profile_gaps)
-    h = np.asarray(traj.profile_films)
-    # w̄ = -Ŵū from h̄ = z̄ + r̄²/2 - w̄ (ū ≠ p̄ on a viscoelastic substrate)
-    w = z[:, None] + 0.5 * np.asarray(disc.r) ** 2 - h
-    errors = _errors_of(series, trajs)
-    status = int(traj.status)
+    primal = concrete(traj)
+    keep = np.flatnonzero(np.asarray(primal.steps.accepted))
+    series = {k: getattr(traj.steps, k)[keep] for k in _SERIES}
+    values = {k: np.asarray(getattr(primal.steps, k))[keep] for k in _SERIES}
+    traced = any_traced(traj)
+    if not traced:
+        series = values
+    errors = _errors_of(values, trajs)
+    status = int(primal.status)
     return Result(
         beta=float(beta),
         z0=float(z0),
@@ -711,17 +789,18 @@ def _result_of(trajs, disc, beta, z0, t_end, ptimes, max_steps, compile_s, run_s
         **series,
         r=np.asarray(disc.r),
         profile_times=ptimes,
-        pressure=p,
-        displacement=w,
-        film=h,
-        finite=bool(np.all(np.isfinite(series["force"])) and np.all(np.isfinite(p))),
-        film_positive=bool(np.all(series["film_min"] > 0)),
+        pressure=traj.profiles if traced else np.asarray(traj.profiles),
+        displacement=_displacement_of(disc, traj if traced else primal),
+        film=traj.profile_films if traced else np.asarray(traj.profile_films),
+        finite=bool(np.all(np.isfinite(values["force"]))
+                    and np.all(np.isfinite(primal.profiles))),
+        film_positive=bool(np.all(values["film_min"] > 0)),
         finished=status == DONE,
         stop_reason=stop_reason(status, max_steps),
         **{f"{f}_error": errors[f] for f in _ESTIMATED},
-        accepted=int(traj.accepted),
-        rejected=int(traj.rejected),
+        accepted=int(primal.accepted),
+        rejected=int(primal.rejected),
         compile_s=compile_s,
         run_s=run_s,
-        steps=jax.tree_util.tree_map(jnp.asarray, steps),
+        steps=jax.tree_util.tree_map(jnp.asarray, traj.steps),
     )
