@@ -106,8 +106,8 @@ class Adequacy(NamedTuple):
         noise_lag1: ρ̂, the noise's estimated lag-1 correlation.
         smooth: whether the residuals change more smoothly from one sample to the next than
             noise with |ρ| <= ``RHO_MAX`` can (a misfit at every scale).
-        misfit: the largest |block mean| of the residuals over the segments, as a fraction of
-            the peak |response| (NaN when no segment was long enough).
+        misfit: the rms of the residuals' systematic part, √(mean e² - σ̂²), as a fraction of
+            the response's peak (``peak``).
         z_critical: the z a test must exceed to fail.
         segments: a :class:`SegmentCheck` per segment.
         solver_explains: True when the misfit passes as noise once the solver's own error
@@ -168,7 +168,9 @@ def noise_estimate(e: np.ndarray) -> tuple[float, float, float]:
     if not v1 > 0:
         return 0.0, 0.0, 0.0
     raw = v2 / v1 - 1.0
-    rho = float(np.clip(raw, 0.0, RHO_MAX))
+    # the noise is no larger than the residuals: σ̂² = v1/(1 - ρ̂) <= mean e², ρ̂ <= 1 - v1/mean e²
+    top = min(RHO_MAX, 1.0 - v1 / max(float(np.mean(e**2)), 1e-300))
+    rho = float(np.clip(raw, 0.0, max(top, 0.0)))
     return v1 / (1.0 - rho), rho, raw
 
 
@@ -324,8 +326,8 @@ def judge(residual, segments, n_params, *, peak=None, model_error=None, viscoela
         residual: data - model at the samples, in time order [the response's unit].
         segments: (name, start, stop) of each segment (:func:`segments_of`).
         n_params: the parameters fitted to this trace.
-        peak: the peak |response| the systematic misfit is measured against (default: the
-            largest |residual|).
+        peak: the size of the response the systematic misfit is measured against (default:
+            the largest |residual|).
         model_error: the solver's signed error estimate of the model at the samples (the
             same unit), or None: then the judgement does not ask whether it explains a misfit.
         viscoelastic, layer, drive: the fitted model (for the advice).
@@ -354,9 +356,9 @@ def judge(residual, segments, n_params, *, peak=None, model_error=None, viscoela
         if m_err.shape == e.shape and np.all(np.isfinite(m_err)) and np.any(m_err != 0):
             alt = _tests(e + m_err, segments, n_params)
             solver = bool(alt is not None and _passes(alt))
-    sizes = [c.misfit for c in checks if c.blocks > 0]
     peak = float(np.max(np.abs(e))) if peak is None else float(peak)
-    misfit = max(sizes) / peak if sizes and peak > 0 else nan
+    excess = float(np.mean(e**2)) - t["s2"]
+    misfit = math.sqrt(max(excess, 0.0)) / peak if peak > 0 else nan
     message, advice = _words(ok, t, checks, misfit, solver, viscoelastic, layer, drive,
                              metadata or {})
     return Adequacy(ok, t["chi2"], t["chi2_z"], t["runs_z"], math.sqrt(t["s2"]), t["rho"],
@@ -381,12 +383,12 @@ def _words(ok, t, checks, misfit, solver, viscoelastic, layer, drive, meta):
     if bad:
         what.append(f"residuals systematic over {_join(bad)}")
     if t["smooth"]:
-        what.append("residuals smooth from sample to sample, as no noise of a short "
-                    "correlation is")
+        what.append("residuals that change smoothly from sample to sample, as short-range "
+                    "noise does not")
     if t["runs_z"] < -t["z_crit"]:
         what.append(f"residual signs in long runs (runs test z = {t['runs_z']:.1f})")
     if math.isfinite(misfit):
-        what.append(f"systematic misfit up to {100 * misfit:.2g} % of the peak")
+        what.append(f"a systematic part of {100 * misfit:.2g} % of the peak, rms")
     advice = []
     if solver:
         advice.append("a tighter --rtol (the solver's own error estimate accounts for the "

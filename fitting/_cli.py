@@ -174,7 +174,7 @@ def fit_figure(res: FitResult):
     against = _indentation(res)
     fig = plt.figure(figsize=(13, 8))
     gs = fig.add_gridspec(3, 2, width_ratios=[1.55, 1], height_ratios=[3, 1.3, 1.2],
-                          hspace=0.35, wspace=0.08)
+                          hspace=0.55, wspace=0.08)
     name = os.path.basename(res.name) or "trace"
     if against is None:
         ax = fig.add_subplot(gs[0, 0])
@@ -245,18 +245,19 @@ def _adequacy_marks(ax, res: FitResult) -> None:
     if adequacy is None or adequacy.ok is None:
         return
     t = res.time
-    for seg in adequacy.segments:
-        if seg.systematic:
-            ax.axvspan(t[seg.start], t[seg.stop - 1], color="C3", alpha=0.12, lw=0,
-                       label=f"systematic over the {seg.name}")
+    bad = [seg for seg in adequacy.segments if seg.systematic]
+    for k, seg in enumerate(bad):
+        ax.axvspan(t[seg.start], t[seg.stop - 1], color="C3", alpha=0.12, lw=0,
+                   label="systematic residuals" if k == 0 else None)
+    chi2 = f"reduced chi2 {adequacy.reduced_chi2:.3g} against the noise in the residuals"
     if adequacy.ok:
-        title, color = (f"the model describes these data (reduced chi2 "
-                        f"{adequacy.reduced_chi2:.3g} against the noise in the residuals)"), "C2"
+        title, color = f"the model describes these data ({chi2})", "C2"
     else:
-        title, color = "THE MODEL DOES NOT DESCRIBE THESE DATA: " + adequacy.message.split(
-            "(", 1)[1].split(");", 1)[0].rstrip(")"), "C3"
-    ax.set_title(textwrap.fill(title, 110), fontsize=8, color=color, loc="left")
-    if any(seg.systematic for seg in adequacy.segments):
+        where = (" over the " + ", the ".join(seg.name for seg in bad)) if bad else ""
+        title, color = (f"THE MODEL DOES NOT DESCRIBE THESE DATA: residuals systematic{where} "
+                        f"({chi2})"), "C3"
+    ax.set_title(textwrap.fill(title, 100), fontsize=8, color=color, loc="left")
+    if bad:
         ax.legend(loc="best", fontsize=7)
 
 

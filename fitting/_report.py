@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import textwrap
 
 import numpy as np
 
@@ -244,23 +245,30 @@ def _adequacy_lines(res: FitResult) -> list[str]:
     a = res.adequacy
     if a is None:
         return []
-    lines = ["[[Model adequacy]]", f"    {'yes' if a.ok else 'NO' if a.ok is False else '?'}: "
-             + a.message.split("; what could help:")[0]]
+    verdict = f"{'yes' if a.ok else 'NO' if a.ok is False else '?'}: " + a.message.split(
+        "; what could help:")[0]
+    lines = ["[[Model adequacy]]", *textwrap.wrap(verdict, 96, initial_indent="    ",
+                                                   subsequent_indent="      ")]
     if a.ok is None:
         return lines
+    unit = "N" if res.spec.response == "force" else "m"
     lines += [
-        f"    noise in the residuals = {a.noise_sigma:.3g} (lag-1 correlation {a.noise_lag1:.2f})",
+        f"    noise in the residuals = {a.noise_sigma:.3g} {unit} (lag-1 correlation "
+        f"{a.noise_lag1:.2f})",
         f"    reduced chi2 against it = {a.reduced_chi2:.4g} (z = {a.chi2_z:.2f})",
-        f"    runs test z         = {a.runs_z:.2f}",
+        f"    runs test z = {a.runs_z:.2f}",
     ]
     for seg in a.segments:
-        shape = (f"z = {seg.z:.2f} on {seg.blocks} blocks, largest block mean {seg.misfit:.3g}"
+        shape = (f"z = {seg.z:.2f} on {seg.blocks} blocks, largest block mean {seg.misfit:.3g} "
+                 f"{unit}"
                  if seg.blocks else "too short to test")
         mark = " (systematic)" if seg.systematic else ""
         lines.append(f"    {seg.name + ':':<20s} {shape}{mark}")
     lines.append(f"    a test fails beyond |z| = {a.z_critical:.2f} (1 % for the model that made "
                  "the data)")
-    lines += [f"    what could help: {x}" for x in a.advice]
+    for x in a.advice:
+        lines += textwrap.wrap(f"what could help: {x}", 96, initial_indent="    ",
+                               subsequent_indent="      ")
     return lines
 
 

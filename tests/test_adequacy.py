@@ -107,11 +107,11 @@ def test_too_short_a_trace_is_not_judged():
 
 
 def test_fits_of_the_right_and_the_wrong_model():
-    """One batched elastic fit (rtol 1e-3, a coarse mesh) of two traces with 1 % white noise, both cut to
-    t̄ <= 3: the paper's elastic trace, which the model describes, and the viscoelastic one
-    (E0/E∞ = 1.5, τ = 0.5 s), which it cannot. The first passes with no flag and stays
-    plausible; the second fails in every output, the summary line, the flags, ``plausible`` and
-    the report, with the advice to try a viscoelastic solid and --compare."""
+    """One batched elastic fit (rtol 1e-3, a coarse mesh) of two traces with 1 % white noise,
+    both cut to t̄ <= 3: the paper's elastic trace, which the model describes, and the
+    viscoelastic one (E0/E∞ = 1.5, τ = 0.5 s), which it cannot. The first passes with no flag
+    and stays plausible; the second fails in every output (the summary line, the flags,
+    ``plausible``, the report), with the advice to try a viscoelastic solid and --compare."""
     elastic, _ = short_trace("paper_dc154", 3.0)
     visco, _ = short_trace("visco_dc140", 3.0)
     draws = [fitting.noise_draws(tr, 1, seed=s)[0]._replace(name=tr.name)
