@@ -407,8 +407,9 @@ def _words(ok, t, checks, misfit, solver, viscoelastic, layer, drive, meta):
                           "lubjax fits one relaxation time)")
         if "instrument_file" in meta:
             if any(n == "approach" for n in bad) or not bad:
-                advice.append("a shallower fit range (a modulus that changes with depth, or an "
-                              "indentation beyond the paraboloid, misfits a deep approach)")
+                advice.append("another depth range (a modulus that changes with depth misfits "
+                              "a deep approach; the toe of a long force rise alone does not "
+                              "hold E*)")
             if held and meta.get("modality") == "creep-compliance":
                 advice.append("the other drive for the constant-force dwell (--drive "
                               + ("spring)" if drive == "force" else "force, load control)"))

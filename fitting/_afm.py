@@ -398,6 +398,7 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
         meta["approach_cut_m"] = repr(cut - float(d_first))
     if "dwell" in order:  # where the dwell begins, for the segments of the adequacy judgement
         meta["dwell_start_s"] = repr(float(t[np.argmax(lab == "dwell")] - t[0]))
+    meta["start_time_s"] = repr(float(t[0]))  # the file's time of the trace's t = 0
     if poisson is not None:
         meta["poisson_ratio"] = repr(float(poisson))
     meta.update(extra_metadata or {})

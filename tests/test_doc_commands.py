@@ -54,12 +54,6 @@ DOCUMENTED = [
     ("--plot out/run.txt", 0, r"^exit status 2$"),  # errors.md: an unknown plot format
     ("data/water_dc140.csv --no-cache --film-error auto", 1, r"NOT CONVERGED"),  # fitting.md
 ]
-#: Commands that cannot run as written yet, and why (strict: they fail the test once they run).
-REFUSED = {
-    "fmt-jpk-cc_pr14-polymergel-2021.06.30.jpk-force": (
-        "the creep indents 2 µm = 0.2 R at the nominal R = 10 µm, beyond the paraboloid's limit "
-        "at 600 samples: the exact sphere of issue 41, item 3"),
-}
 #: The fast tier runs the README's first command and the refusal of errors.md; every other
 #: command runs in the slow tier (2-50 s each on two cores, even with the compilation cache
 #: the commands share: about 7 minutes in all, one after another).
@@ -117,9 +111,6 @@ def _marks(cmd: Command):
     marks = []
     if not cmd.text.startswith(FAST):
         marks.append(pytest.mark.slow)
-    for piece, why in REFUSED.items():
-        if piece in cmd.text:
-            marks.append(pytest.mark.xfail(reason=why, strict=True))
     return marks
 
 
