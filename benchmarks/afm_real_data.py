@@ -10,8 +10,14 @@ For each curve, Young's modulus E (ν = 0.5, E = 0.75 E*):
 
 * nanite 4.2.3, model ``hertz_para`` (Hertz, paraboloid), its default preprocessing
   (tip position, force offset, contact point), on the whole approach;
-* nanite the same, restricted to the travel lubjax sees (``range_type="relative cp"``, from
-  half the fitted depth before the contact point to lubjax's cut);
+* nanite the same on the samples lubjax fits (the file's times from the trace's first row,
+  its ``start_time_s``, to its last: from half the in-contact travel before the contact
+  estimate to lubjax's cut), an absolute range of nanite's tip position, its contact point
+  started from the whole-approach fit's. (Started from nanite's own initial value, 25 µm
+  away on the Chiaro curve, the fit ends with the contact point beyond the range, the model
+  a constant over it and E wherever the optimiser left it; nanite's
+  ``range_type="relative cp"`` walks off the same way:
+  ``python -m benchmarks.studies.afm_unexplained``.)
 * the vendor's E where the file gives one (the Chiaro export's E[v=0.500]);
 * lubjax (``lubjax-fit``: the cantilever as the spring drive, the approach cut near contact
   and at MAX_TRAVEL_OVER_RADIUS·R, 300 samples, rtol 1e-3): elastic half-space under a film
@@ -64,8 +70,9 @@ CURVES = [
 ]
 
 
-def nanite_E(path, index, radius, depth=None):
-    """nanite's Hertz (paraboloid) E on the approach; ``depth``: fit only to that indentation."""
+def nanite_E(path, index, radius, window=None):
+    """nanite's Hertz (paraboloid) E on the approach; ``window``: (first, last) time [s] of the
+    samples to fit (the file's time), else the whole approach."""
     import nanite
 
     group = nanite.load_group(path)
@@ -86,13 +93,18 @@ def nanite_E(path, index, radius, depth=None):
                               "correct_tip_offset"])
     idnt.fit_properties["model_key"] = "hertz_para"
     idnt.fit_properties["segment"] = 0
-    if depth is not None:
-        idnt.fit_properties["range_type"] = "relative cp"
-        # from lubjax's margin before contact (half the depth) to its cut (tip position < 0)
-        idnt.fit_properties["range_x"] = (-depth, 0.5 * depth)
     params = idnt.get_initial_fit_parameters()
     params["R"].value = radius
     params["nu"].value = NU
+    if window is not None:
+        idnt.fit_model(params_initial=params)  # the whole approach: where contact starts
+        params["contact_point"].value = idnt.fit_properties["params_fitted"][
+            "contact_point"].value
+        time = np.asarray(idnt["time"])
+        rows = (np.asarray(idnt["segment"]) == 0) & (time >= window[0]) & (time <= window[1])
+        tip = np.asarray(idnt["tip position"])[rows]
+        idnt.fit_properties["range_type"] = "absolute"
+        idnt.fit_properties["range_x"] = (float(np.min(tip)), float(np.max(tip)))
     idnt.fit_model(params_initial=params)
     return float(idnt.fit_properties["params_fitted"]["E"].value)
 
@@ -133,10 +145,11 @@ def approach_row(root, settings, label, rel, index, radius, rnote):
     end = float(np.max(tr.displacement)) if cut is None else cut
     depth = end - tr.meta_float("contact_estimate_m")  # stage travel past contact
     e_full = nanite_E(path, index, R)
-    e_cut = nanite_E(path, index, R, depth)
+    start = tr.meta_float("start_time_s")
+    e_cut = nanite_E(path, index, R, (start, start + float(tr.time[-1])))
     vendor = tr.meta_float("vendor_E_star_Pa")
     (e, de), (e0, de0) = _e(res), _e(bare)
-    print(f"{label}: nanite {e_full:.4g} Pa (same depth {e_cut:.4g}), lubjax {e:.4g} ± {de:.2g} "
+    print(f"{label}: nanite {e_full:.4g} Pa (same samples {e_cut:.4g}), lubjax {e:.4g} ± {de:.2g} "
           f"Pa (no film {e0:.4g}), beta {res.beta:.3g} ({wall + wall_bare:.1f} s)", flush=True)
     return dict(
         curve=label, R_um=R * 1e6, R_from=rnote, depth_um=depth * 1e6,
@@ -146,7 +159,7 @@ def approach_row(root, settings, label, rel, index, radius, rnote):
         z0_um=res.values["z0"] * 1e6, red_chi2=res.stats["reduced_chi2"],
         converged=res.converged, E_no_film=e0, E_no_film_err=de0,
         red_chi2_no_film=bare.stats["reduced_chi2"], converged_no_film=bare.converged,
-        wall_s=wall + wall_bare)
+        adequate=_adequate(res), adequate_no_film=_adequate(bare), wall_s=wall + wall_bare)
 
 
 def dwell_row(root, settings, label, rel, index, radius, rnote, drive):
@@ -164,7 +177,17 @@ def dwell_row(root, settings, label, rel, index, radius, rnote, drive):
         stiffening=res.values["stiffening"], tau_s=res.values["relaxation_time"],
         eta_mPa_s=res.values["viscosity"] * 1e3, beta=res.beta,
         red_chi2=res.stats["reduced_chi2"], converged=res.converged,
-        E_nanite_approach=e_nanite, wall_s=wall)
+        E_nanite_approach=e_nanite, adequate=_adequate(res), wall_s=wall)
+
+
+def _adequate(res):
+    """The adequacy judgement in a table cell: "yes" or "no", its reduced χ² against the noise
+    left in the residuals, and the misfitting segments (fitting._adequacy)."""
+    a = res.adequacy
+    bad = [s.name for s in a.segments if s.systematic]
+    why = f"χ² {a.reduced_chi2:.3g}" + (", " + ", ".join(bad) if bad else "") + (
+        ", smooth" if a.smooth else "")
+    return f"{'yes' if a.ok else 'no'} ({why})"
 
 
 def _flag(ok):
@@ -177,29 +200,32 @@ def _g(x, fmt=".4g"):
 
 def approach_table(rows):
     lines = ["| curve | R [µm] (from) | stage travel past contact [µm] | E nanite, whole "
-             "approach | E nanite, same depth | E vendor | E lubjax, with the film | η [mPa s] "
-             "| β | reduced χ² | E lubjax, no film | reduced χ², no film |",
-             "|" + "---|" * 12]
+             "approach | E nanite, same samples | E vendor | E lubjax, with the film | η [mPa s] "
+             "| β | reduced χ² | describes the data | E lubjax, no film | reduced χ², no film "
+             "| describes the data, no film |",
+             "|" + "---|" * 14]
     for r in rows:
         lines.append(
             f"| {r['curve']} | {_g(r['R_um'])} ({r['R_from']}) | {_g(r['depth_um'], '.3g')} | "
             f"{_g(r['E_nanite_full'])} | {_g(r['E_nanite_same_depth'])} | {_g(r['E_vendor'])} | "
             f"{_g(r['E_lubjax'])} ± {_g(r['E_lubjax_err'], '.2g')} | {_g(r['eta_mPa_s'], '.3g')}"
             f" | {_g(r['beta'], '.3g')} | {_g(r['red_chi2'], '.3g')}{_flag(r['converged'])} | "
+            f"{r.get('adequate') or '—'} | "
             f"{_g(r['E_no_film'])} ± {_g(r['E_no_film_err'], '.2g')} | "
-            f"{_g(r['red_chi2_no_film'], '.3g')}{_flag(r['converged_no_film'])} |")
+            f"{_g(r['red_chi2_no_film'], '.3g')}{_flag(r['converged_no_film'])} | "
+            f"{r.get('adequate_no_film') or '—'} |")
     return lines
 
 
 def dwell_table(rows):
     lines = ["| curve | R [µm] (from) | E∞ lubjax [Pa] | E0/E∞ | τ [s] | η [mPa s] | β | "
-             "reduced χ² | E nanite, approach [Pa] |", "|" + "---|" * 9]
+             "reduced χ² | describes the data | E nanite, approach [Pa] |", "|" + "---|" * 10]
     for r in rows:
         lines.append(
             f"| {r['curve']} | {_g(r['R_um'])} ({r['R_from']}) | {_g(r['E_inf'])} ± "
             f"{_g(r['E_inf_err'], '.2g')} | {_g(r['stiffening'], '.3g')} | {_g(r['tau_s'], '.3g')}"
             f" | {_g(r['eta_mPa_s'], '.3g')} | {_g(r['beta'], '.3g')} | "
-            f"{_g(r['red_chi2'], '.3g')}{_flag(r['converged'])} | "
+            f"{_g(r['red_chi2'], '.3g')}{_flag(r['converged'])} | {r.get('adequate') or '—'} | "
             f"{_g(r['E_nanite_approach'])} |")
     return lines
 

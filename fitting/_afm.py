@@ -298,14 +298,14 @@ def _smooth_stage(t, d, lab, order):
 
 def _decimate(t, d, f, lab, order, max_samples):
     """Block means per segment, the segments' shares of ``max_samples`` in proportion to
-    their counts."""
+    their counts; the segment name of each mean comes along."""
     parts = []
     for s in order:
         idx = np.flatnonzero(lab == s)
         n_out = max(10, int(round(max_samples * idx.size / lab.size)))
-        parts.append([_block_mean(x[idx], n_out) for x in (t, d, f)])
-    t, d, f = (np.concatenate([p[i] for p in parts]) for i in range(3))
-    return t, d, f
+        means = [_block_mean(x[idx], n_out) for x in (t, d, f)]
+        parts.append([*means, np.full(means[0].size, s)])
+    return tuple(np.concatenate([p[i] for p in parts]) for i in range(4))
 
 
 def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
@@ -376,7 +376,7 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
     smoothing = None
     if drive == "spring":
         d, smoothing = _smooth_stage(t, d, lab, order)
-    t, d, f = _decimate(t, d, f, lab, order, max_samples)
+    t, d, f, lab = _decimate(t, d, f, lab, order, max_samples)
     d = d - d[0]  # the first block's mean: travel since the first row kept
     reach = float(np.max(np.abs(d)))
     what = ("the stage travel kept ({:.3g} m: the indentation, the cantilever's bending F/k "
@@ -396,6 +396,9 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
         meta["stage_smoothing_rms_m"] = repr(smoothing)
     if cut is not None:
         meta["approach_cut_m"] = repr(cut - float(d_first))
+    if "dwell" in order:  # where the dwell begins, for the segments of the adequacy judgement
+        meta["dwell_start_s"] = repr(float(t[np.argmax(lab == "dwell")] - t[0]))
+    meta["start_time_s"] = repr(float(t[0]))  # the file's time of the trace's t = 0
     if poisson is not None:
         meta["poisson_ratio"] = repr(float(poisson))
     meta.update(extra_metadata or {})

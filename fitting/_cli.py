@@ -111,11 +111,15 @@ def summary_line(res: FitResult) -> str:
 
     Returns:
         The trace's name, the fitted values, β, z̄0, the rms residual, the reduced χ², whether
-        it converged and is identifiable, the iterations and the wall time.
+        it converged, is identifiable and describes the data (``res.adequacy``), the
+        iterations and the wall time.
     """
     status = "converged" if res.converged else "NOT CONVERGED"
     if not res.identifiable:
         status += ", NOT IDENTIFIABLE"
+    if res.adequacy is not None and res.adequacy.ok is not None:
+        status += (", the model describes the data" if res.adequacy.ok
+                   else ", THE MODEL DOES NOT DESCRIBE THE DATA")
     labels = {"E_star": "E*", "viscosity": "eta", "relaxation_time": "tau",
               "stiffening": "E0/Einf"}
     values = ", ".join(
@@ -170,7 +174,7 @@ def fit_figure(res: FitResult):
     against = _indentation(res)
     fig = plt.figure(figsize=(13, 8))
     gs = fig.add_gridspec(3, 2, width_ratios=[1.55, 1], height_ratios=[3, 1.3, 1.2],
-                          hspace=0.35, wspace=0.08)
+                          hspace=0.55, wspace=0.08)
     name = os.path.basename(res.name) or "trace"
     if against is None:
         ax = fig.add_subplot(gs[0, 0])
@@ -214,6 +218,7 @@ def fit_figure(res: FitResult):
     ax2.set_ylabel(f"data - model [{unit}]")
     ax2.set_xlabel("time [s]")
     ax2.grid(alpha=0.3)
+    _adequacy_marks(ax2, res)
     ax4 = fig.add_subplot(gs[2, 0])
     r = resid - np.mean(resid)
     lags = np.arange(1, min(60, r.size // 4))
@@ -231,6 +236,29 @@ def fit_figure(res: FitResult):
     ax3.text(0.0, 1.0, fit_report(res), transform=ax3.transAxes, va="top", ha="left",
              family="monospace", fontsize=6.8)
     return fig
+
+
+def _adequacy_marks(ax, res: FitResult) -> None:
+    """The residual panel's title says whether the model describes the data; the segments
+    with systematic residuals are shaded."""
+    adequacy = res.adequacy
+    if adequacy is None or adequacy.ok is None:
+        return
+    t = res.time
+    bad = [seg for seg in adequacy.segments if seg.systematic]
+    for k, seg in enumerate(bad):
+        ax.axvspan(t[seg.start], t[seg.stop - 1], color="C3", alpha=0.12, lw=0,
+                   label="systematic residuals" if k == 0 else None)
+    chi2 = f"reduced chi2 {adequacy.reduced_chi2:.3g} against the noise in the residuals"
+    if adequacy.ok:
+        title, color = f"the model describes these data ({chi2})", "C2"
+    else:
+        where = (" over the " + ", the ".join(seg.name for seg in bad)) if bad else ""
+        title, color = (f"THE MODEL DOES NOT DESCRIBE THESE DATA: residuals systematic{where} "
+                        f"({chi2})"), "C3"
+    ax.set_title(textwrap.fill(title, 100), fontsize=8, color=color, loc="left")
+    if bad:
+        ax.legend(loc="best", fontsize=7)
 
 
 def plot_fit(res: FitResult, path: str) -> None:
@@ -288,7 +316,7 @@ def write_table(results, path: str) -> None:
     for n in names:
         cols += [n, f"{n}_se"]
     cols += ["beta", "z0_over_dc", "rms_residual", "reduced_chi2", "noise_model", "converged",
-             "identifiable", "n_iterations", "wall_s"]
+             "identifiable", "adequate", "adequacy_reduced_chi2", "n_iterations", "wall_s"]
     with atomic_open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(cols)
@@ -296,8 +324,11 @@ def write_table(results, path: str) -> None:
             row = [r.name, r.spec.drive, r.spec.substrate_label()]
             for n in names:
                 row += [r.values.get(n, ""), r.stderr.get(n, "")]
+            adequacy = r.adequacy
             row += [r.beta, r.z0_over_dc, r.rms_residual, r.stats["reduced_chi2"],
-                    r.stats["noise_model"], r.converged, r.identifiable, r.n_iterations,
+                    r.stats["noise_model"], r.converged, r.identifiable,
+                    "" if adequacy is None or adequacy.ok is None else adequacy.ok,
+                    "" if adequacy is None else adequacy.reduced_chi2, r.n_iterations,
                     r.wall_s]
             w.writerow(row)
 

@@ -54,7 +54,7 @@ from lubjax._fitting_api import compiler as _compiler
 from lubjax._fitting_api import sharding as _sharding
 from lubjax._fitting_api import single_threaded_blas
 
-from . import _cache, _checks, _model, _stats
+from . import _adequacy, _cache, _checks, _model, _stats
 from ._io import Trace
 from ._model import ModelSpec, Scales
 
@@ -127,6 +127,8 @@ class FitResult(NamedTuple):
         fixed: the parameters held at given values (``fixed=``), stderr 0.
         input: the drive's measured input at the samples: the stage (indenter) travel [m], or
             the load [N] under load control (None where not recorded).
+        adequacy: whether the model describes the data (``fitting._adequacy.Adequacy``: the
+            residuals tested against their noise; None for a result made without it).
     """
 
     name: str
@@ -152,6 +154,7 @@ class FitResult(NamedTuple):
     metadata: dict
     fixed: tuple = ()
     input: np.ndarray | None = None
+    adequacy: _adequacy.Adequacy | None = None
 
     @property
     def E_star(self) -> float:
@@ -908,6 +911,12 @@ def fit_traces(
     model = np.asarray(data.response) + r_all * np.asarray(data.noise)[:, None]
     errors = _solver_error(evaluate, xs, r_all, traces, scales, spec, settings, mesh, groups) if (
         model_error) else None
+    # the solver's error estimate of each trace's model [its response's unit]
+    model_errors = [None] * len(traces)
+    for k, members in enumerate(groups if errors is not None else []):
+        for j, t in enumerate(members):
+            own = errors[k][j * n_pad : j * n_pad + traces[t].time.size]
+            model_errors[t] = own * float(data.noise[t])
     wall = (time.perf_counter() - t0) / len(traces)
     results = []
     for k, members in enumerate(groups):
@@ -921,7 +930,7 @@ def fit_traces(
             results.append(_trace_result(traces[t], spec, scales[t], start, layout, t, o,
                                          summary, j, members, names, shared, method,
                                          evaluate.runs, wall, model[t, : traces[t].time.size],
-                                         fixed))
+                                         fixed, model_errors[t]))
     return results
 
 
@@ -1009,8 +1018,9 @@ def _stack_traces(traces, scales, spec, mesh):
 
 
 def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, members, names,
-                  shared, method, runs, wall, model, fixed=None) -> FitResult:
-    """Map a problem's x, covariance and statistics onto trace t's parameters (SI)."""
+                  shared, method, runs, wall, model, fixed=None, model_error=None) -> FitResult:
+    """Map a problem's x, covariance and statistics onto trace t's parameters (SI), and judge
+    whether the model describes the trace (``fitting._adequacy``)."""
     M = layout.M[t]
     theta = layout.base[t] + M @ outcome.x
     values, stderr, deriv = {}, {}, np.zeros(len(spec.names))
@@ -1060,6 +1070,10 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
     flags += _checks.plausibility_flags(
         {n: v for n, v in values.items() if n not in fixed}, scales.speed,
         _checks.e_star_range(trace.metadata))
+    adequacy = judge_adequacy(trace, spec, scales, model, int(np.count_nonzero(M.any(axis=1))),
+                              model_error)
+    if adequacy.ok is False:
+        flags.append(adequacy.message)
     return FitResult(
         name=trace.name, spec=spec, values=values, stderr=stderr, correlation=corr,
         shared=tuple(s for s in shared if len(members) > 1),
@@ -1069,7 +1083,32 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
         start=start, flags=tuple(flags), time=trace.time, data=_channel(trace, spec),
         model=model, metadata=dict(trace.metadata), fixed=tuple(fixed),
         input=trace.force if spec.drive == "force" else trace.displacement,
+        adequacy=adequacy,
     )
+
+
+def judge_adequacy(trace, spec, scales, model, n_params, model_error=None):
+    """Whether ``model`` (the fitted response at the trace's samples) describes the trace:
+    ``fitting._adequacy.judge`` on its residuals, by the trace's segments.
+
+    Args:
+        trace: the :class:`Trace`.
+        spec: the fitted :class:`ModelSpec`.
+        scales: the trace's :class:`Scales`.
+        model: the fitted response at the samples [N, or m under load control].
+        n_params: the parameters fitted to this trace.
+        model_error: the solver's error estimate of ``model`` (same unit), or None.
+
+    Returns:
+        fitting._adequacy.Adequacy: the judgement.
+    """
+    data = _channel(trace, spec)
+    segments = _adequacy.segments_of(trace.time, trace.metadata, scales.t_on,
+                                     scales.t_on + scales.t_end_motion * scales.time_scale)
+    return _adequacy.judge(data - model, segments, n_params, peak=float(np.ptp(data)),
+                           model_error=model_error, viscoelastic=spec.viscoelastic,
+                           layer=spec.layer is not None, drive=spec.drive,
+                           metadata=trace.metadata)
 
 
 def _undetermined(values, stderr, fixed) -> list[str]:

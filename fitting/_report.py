@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import textwrap
 
 import numpy as np
 
@@ -80,8 +81,9 @@ def result_to_dict(res: FitResult) -> dict:
 
     Returns:
         A dict of plain numbers, strings, lists and dicts. Its ``plausible`` is False when E*,
-        η or the ramp speed lies outside soft lubricated contact (``fitting._checks``); the
-        flags then name the likely unit mistake.
+        η or the ramp speed lies outside soft lubricated contact (``fitting._checks``; the
+        flags then name the likely unit mistake), or when the model does not describe the
+        data (``adequacy``, ``fitting._adequacy``; the flags say how and what could help).
     """
     names = res.spec.names
     resp_unit = "N" if res.spec.response == "force" else "m"
@@ -121,7 +123,8 @@ def result_to_dict(res: FitResult) -> dict:
         fixed=list(res.fixed or ()),
         plausible=not plausibility_flags(
             {n: v for n, v in res.values.items() if n not in (res.fixed or ())}, res.scales.speed,
-            e_star_range(res.metadata)),
+            e_star_range(res.metadata)) and not (res.adequacy and res.adequacy.ok is False),
+        adequacy=None if res.adequacy is None else res.adequacy.to_dict(),
         start={**{units(res, n)[0]: res.start.values[n] for n in names},
                "notes": list(res.start.notes)},
         metadata=dict(res.metadata),
@@ -225,7 +228,9 @@ def fit_report(res: FitResult, min_correl: float = 0.1) -> str:
     lines += [p for _, p in sorted(pairs, reverse=True)]
     lines.append("[[Start values]]")
     lines += [f"    {note}" for note in res.start.notes]
-    extra = [f for f in res.flags[1:]]
+    lines += _adequacy_lines(res)
+    said = res.adequacy.message if res.adequacy is not None else None
+    extra = [f for f in res.flags[1:] if f != said]
     if extra:
         lines.append("[[Flags]]")
         lines += [f"    {f}" for f in extra]
@@ -233,6 +238,38 @@ def fit_report(res: FitResult, min_correl: float = 0.1) -> str:
         lines.append("[[Model comparison]]")
         lines += [f"    {x}" for x in st["comparison"]["report"]]
     return "\n".join(lines)
+
+
+def _adequacy_lines(res: FitResult) -> list[str]:
+    """The report's [[Model adequacy]] section (``fitting._adequacy``)."""
+    a = res.adequacy
+    if a is None:
+        return []
+    verdict = f"{'yes' if a.ok else 'NO' if a.ok is False else '?'}: " + a.message.split(
+        "; what could help:")[0]
+    lines = ["[[Model adequacy]]", *textwrap.wrap(verdict, 96, initial_indent="    ",
+                                                   subsequent_indent="      ")]
+    if a.ok is None:
+        return lines
+    unit = "N" if res.spec.response == "force" else "m"
+    lines += [
+        f"    noise in the residuals = {a.noise_sigma:.3g} {unit} (lag-1 correlation "
+        f"{a.noise_lag1:.2f})",
+        f"    reduced chi2 against it = {a.reduced_chi2:.4g} (z = {a.chi2_z:.2f})",
+        f"    runs test z = {a.runs_z:.2f}",
+    ]
+    for seg in a.segments:
+        shape = (f"z = {seg.z:.2f} on {seg.blocks} blocks, largest block mean {seg.misfit:.3g} "
+                 f"{unit}"
+                 if seg.blocks else "too short to test")
+        mark = " (systematic)" if seg.systematic else ""
+        lines.append(f"    {seg.name + ':':<20s} {shape}{mark}")
+    lines.append(f"    a test fails beyond |z| = {a.z_critical:.2f} (1 % for the model that made "
+                 "the data)")
+    for x in a.advice:
+        lines += textwrap.wrap(f"what could help: {x}", 96, initial_indent="    ",
+                               subsequent_indent="      ")
+    return lines
 
 
 def short_value(res: FitResult, n: str) -> str:

@@ -6,6 +6,12 @@ order, a gradient), not the defaults' accuracy: one mesh of 0.05 spacing in the 
 
 import hashlib
 import os
+import subprocess
+import sys
+import tarfile
+import tempfile
+import zipfile
+from pathlib import Path
 
 import numpy as np
 
@@ -94,3 +100,52 @@ def accuracy_reference(beta, z0):
     os.makedirs(os.path.dirname(path), exist_ok=True)
     np.savez(path, t=ACCURACY_T_OUT, **out)
     return out
+
+
+# --------------------------------------------------------------------------- vendor files
+
+#: The pinned source distributions whose tests/ and examples/ hold real instrument files.
+SDISTS = {"afmformats": "0.18.7", "nanite": "4.2.3"}
+
+
+def vendor_cache() -> Path:
+    """Where the sdists' instrument files are kept: ``LUBJAX_TESTDATA``, default
+    ~/.cache/lubjax/testdata."""
+    return Path(os.environ.get("LUBJAX_TESTDATA", Path.home() / ".cache/lubjax/testdata"))
+
+
+def vendor_data() -> Path:
+    """The instrument files of the pinned sdists, extracted once into :func:`vendor_cache`
+    (``pytest.skip`` without the package index).
+
+    Each sdist is downloaded and extracted into a private folder, then renamed into place:
+    test workers running at once (pytest -n) never see half a folder."""
+    import pytest
+
+    root = vendor_cache()
+    root.mkdir(parents=True, exist_ok=True)
+    for name, version in SDISTS.items():
+        final = root / f"{name}-{version}"
+        if final.is_dir():
+            continue
+        with tempfile.TemporaryDirectory(dir=root) as tmp:
+            cmd = [sys.executable, "-m", "pip", "download", "-q", "--no-deps", "--no-binary",
+                   ":all:", "-d", tmp, f"{name}=={version}"]
+            run = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+            archive = Path(tmp) / f"{name}-{version}.tar.gz"
+            if run.returncode != 0 or not archive.exists():
+                pytest.skip(f"the package index is not reachable (pip download {name}=="
+                            f"{version} failed): {run.stderr.strip()[-200:]}")
+            with tarfile.open(archive) as tar:
+                members = [m for m in tar.getmembers() if m.isfile() and (
+                    "/tests/data/" in m.name or "/examples/data/" in m.name)]
+                tar.extractall(tmp, members=members, filter="data")
+            for zipped in (Path(tmp) / final.name).glob("tests/data/fmt-chiaro-*.zip"):
+                with zipfile.ZipFile(zipped) as z:
+                    z.extractall(zipped.parent)
+            try:
+                os.rename(Path(tmp) / final.name, final)
+            except OSError:  # another worker was first
+                if not final.is_dir():
+                    raise
+    return root
