@@ -246,12 +246,12 @@ def film_collapses(history, dt, order, max_order: int):
 
 
 #: Under the force norm a thin film's local error is still at most this many times rtol of
-#: itself (10 % at the default rtol). The film's error hardly moves the force, but its
-#: derivatives do: a film drained to 10⁻⁷ moves by ~10⁻³ per unit z̄0 at a node the contact's
-#: edge has passed, and the force's derivative carries that shift (~1.5 F̄/δ_c of it). Left
-#: free, dF̄/dz̄0 at β = 10⁷, z̄0 = 0.1 was 1e-2 off central differences of converged runs;
-#: held to 10 %, 1.4e-4, for 8 % more steps (benchmarks/derivative_map.py).
-FILM_CAP = 1000.0
+#: itself: the film itself at the default rtol. The film's error hardly moves the force, but
+#: its derivatives do: a film drained to 10⁻⁷ moves by ~10⁻³ per unit z̄0 at a node the
+#: contact's edge has passed, and the force's derivative carries that shift. Left free,
+#: dF̄/dz̄0 at β = 10⁷, z̄0 = 0.1 was 1e-2 off central differences of converged runs; held so,
+#: 4e-4, for 2 % more steps there (19 % at β = 10⁹; benchmarks/derivative_map.py).
+FILM_CAP = 1e4
 
 
 def film_scale(level, previous, film_error: str, beta):
@@ -261,12 +261,12 @@ def film_scale(level, previous, film_error: str, beta):
     through the force it moves: an absolute film error δ inside a contact of indentation
     δ_c = max(-z̄, 0) shifts the elastic indentation by at most δ, and a Hertz force
     (F ∝ δ_c^{3/2}) by 1.5 δ/δ_c of itself. So the film may err by rtol · 2δ_c/3 where that is
-    more than rtol of the film, but not by more than ``FILM_CAP`` × rtol of itself: the force's
-    own tolerance, not a nanometre film at the contact's edge (near dry, β ≫ 1,
-    h̄ ~ (βt̄)^{-1/2} ≪ δ_c, the relative control spends most steps resolving the film's
-    collapse at each node the contact edge passes), with the film still resolved coarsely
-    enough for the derivatives. Without indentation (z̄ ≥ 0, the film carries the force) it is
-    the relative control bit for bit.
+    more than rtol of the film, but not by more than ``FILM_CAP`` × rtol of itself (the film
+    itself at the default rtol): the force's own tolerance, not a nanometre film at the
+    contact's edge (near dry, β ≫ 1, h̄ ~ (βt̄)^{-1/2} ≪ δ_c, the relative control spends most
+    steps resolving the film's collapse at each node the contact edge passes), with the film
+    still resolved coarsely enough for the derivatives. Without indentation (z̄ ≥ 0, the film
+    carries the force) it is the relative control bit for bit.
 
     "auto" (the default) is "force" from β = ``NEAR_DRY_BETA`` on and "relative" below. Below,
     the film inside a contact is what a run reports about it (the late neck at β = 10² is held
