@@ -76,15 +76,12 @@ max_steps=5000, film_error="relative")``. rtol = 3e-4 keeps the model's error at
 parameters of the bundled traces to 2e-3 of the peak (rms 1.5e-4); the force is held to rtol
 only down to 1e-5 of its peak (a load cell's noise is ≥ 1e-3 of it); a bundled trace takes
 about 300 of the 5000 attempts. The film keeps the relative control, not relax's default
-"auto" (the force norm from β = 10⁵ on): under the force norm the model's value moves more
-between neighbouring parameters (its steps change), and a fit follows that noise where the
-data do not determine a parameter. On the near-dry trace (data/water_dc140.csv) with the
-viscosity free, "force" at rtol 1e-4 ended not converged at η = 0.036 ± 0.006 Pa s, where
-"relative" reports 0.013 ± 0.034 Pa s and flags it undetermined (the truth is 1e-3); "auto"
-did not converge with the viscosity free or fixed (its near-dry tangents blow up: docs
-"Derivatives near dry"); a creep fit of a real gel (the JPK polymer-gel dwell) stalled under
-"force". The model's remaining error at the optimum is estimated and folded into the
-reported errors."""
+"auto" (the force norm from β = 10⁵ on): under the force norm the model's value moves between
+neighbouring parameters by a fraction of its tolerance (its steps change), and a fit follows
+that where the data do not determine a parameter (docs/guide/fitting.md, near-dry contacts:
+on data/water_dc140.csv "auto" reports η with an error bar that misses the truth, and with η
+fixed it does not converge). The model's remaining error at the optimum is estimated and
+folded into the reported errors."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -143,10 +143,10 @@ def test_history_push_shifts_every_field_by_one_level(order):
 
 
 def test_saver_shifts_entries_and_reads_profiles_by_the_steps_dense_output():
-    """The saver (lubjax/_rollout.py) on its own: an accepted step t → t_new moves the entry
-    indices down one level, and a profile time inside (t, t_new] gets the step's interpolant of
-    p̄, z̄ and h̄ (here exact: quadratic data, a BDF2 step); one outside keeps what it had."""
-    from lubjax._rollout import Output, _save
+    """The saver (lubjax/_rollout.py) on its own: on an accepted step t → t_new a profile time
+    inside (t, t_new] gets the step's interpolant of p̄, z̄ and h̄ (here exact: quadratic data, a
+    BDF2 step); one outside keeps what it had."""
+    from lubjax._rollout import Profiles, _save_profiles
     from lubjax._stepper import Candidate, Estimate
 
     n, t = 3, 1.0  # levels at t = 0.5, 0.8, 1.0; the new one at 1.25
@@ -166,15 +166,12 @@ def test_saver_shifts_entries_and_reads_profiles_by_the_steps_dense_output():
                         gap=jnp.asarray(t_new**2))
     candidate = Candidate(new, Estimate(*(jnp.zeros(()),) * 4), jnp.asarray(2), 0.0, 0.0)
     times = jnp.asarray([0.9, 1.1, 1.25, 1.3])
-    before = Output(jnp.asarray([7, 6, 5]), jnp.full((4, n), -1.0), jnp.full(4, -1.0),
-                    jnp.full((4, n), -1.0))
-    after = _save(before, 8, jnp.asarray(t), jnp.asarray(t_new), history, candidate, times)
-    np.testing.assert_array_equal(np.asarray(after.entries), [8, 7, 6])
+    before = Profiles(jnp.full((4, n), -1.0), jnp.full(4, -1.0), jnp.full((4, n), -1.0))
+    after = _save_profiles(before, jnp.asarray(t), jnp.asarray(t_new), history, candidate, times)
     for j, s in enumerate(np.asarray(times)):
         inside = t < s <= t_new
         expect_p = np.asarray(q(s)) if inside else np.full(n, -1.0)
-        np.testing.assert_allclose(np.asarray(after.profiles[j]), expect_p, rtol=1e-13)
-        np.testing.assert_allclose(float(after.profile_gaps[j]), s**2 if inside else -1.0,
-                                   rtol=1e-13)
-        np.testing.assert_allclose(np.asarray(after.profile_films[j]),
+        np.testing.assert_allclose(np.asarray(after.pressure[j]), expect_p, rtol=1e-13)
+        np.testing.assert_allclose(float(after.gap[j]), s**2 if inside else -1.0, rtol=1e-13)
+        np.testing.assert_allclose(np.asarray(after.film[j]),
                                    expect_p + 1 if inside else np.full(n, -1.0), rtol=1e-13)
