@@ -319,7 +319,7 @@ def _implicit_film(x, system: ImplicitStep):
     disc = system.disc
     load = system.compliance * p + system.load_offset
     z = system.gap + x[-1]
-    film = z + 0.5 * disc.r**2 + disc.influence @ load
+    film = film_thickness(disc, z, load)
     return film, system.beta * face_conductance(disc, film, film_at_midpoints(disc, film, z))
 
 
