@@ -55,9 +55,10 @@ DOCUMENTED = [
     # fitting.md: converges, to a viscosity whose error bar misses the truth
     ("data/water_dc140.csv --no-cache --film-error auto", 0, r"eta = 0\.0\d+ ± 0\.0\d+ Pa s"),
 ]
-#: The fast tier runs the README's first command and the refusal of errors.md; every other
-#: command runs in the slow tier (2-50 s each on two cores, even with the compilation cache
-#: the commands share: about 7 minutes in all, one after another).
+#: The suite runs the README's first command and the refusal of errors.md; every other command
+#: runs with ``--doc-commands`` (tests/conftest.py), as CI does after the suite: 2-30 s each on
+#: two cores, even with the compilation cache the commands share, about 7 minutes in all one
+#: after another, more than the suite's budget.
 FAST = ("lubjax-fit data/paper_dc140.csv --out out/fit.json --plot out/fit.png",
         "lubjax relax --beta 100 --z0 0.5 --plot out/run.txt; echo \"exit status $?\"")
 
@@ -111,7 +112,7 @@ COMMANDS = documented_commands()
 def _marks(cmd: Command):
     marks = []
     if not cmd.text.startswith(FAST):
-        marks.append(pytest.mark.slow)
+        marks += [pytest.mark.slow, pytest.mark.doc_command]
     return marks
 
 
