@@ -140,16 +140,16 @@ def _poisson(value, where: str) -> float:
         ) from None
 
 
-#: Values of the ``# drive:`` header key (fitting._model.DRIVES).
-DRIVE_VALUES = ("travel", "spring", "force")
+#: The drives a fit knows: the values of the ``# drive:`` header key and of ``--drive``.
+DRIVES = ("travel", "spring", "force")
 
 
 def _check_model_keys(metadata: dict, where) -> None:
-    """``drive`` one of DRIVE_VALUES and ``stiffness_N_m`` a positive number; ``where(key)``
+    """``drive`` one of DRIVES and ``stiffness_N_m`` a positive number; ``where(key)``
     names the place (file and line)."""
-    if "drive" in metadata and metadata["drive"] not in DRIVE_VALUES:
+    if "drive" in metadata and metadata["drive"] not in DRIVES:
         raise TraceError(
-            f"{where('drive')}: drive must be one of {', '.join(DRIVE_VALUES)} (force: load "
+            f"{where('drive')}: drive must be one of {', '.join(DRIVES)} (force: load "
             f"control, the displacement is the response), got {metadata['drive']!r}"
         )
     if "stiffness_N_m" in metadata:

@@ -65,9 +65,7 @@ from lubjax._fitting_api import compiler as _compiler
 from lubjax._fitting_api import motion_start
 from lubjax._fitting_api import sharding as _sharding
 
-from ._io import Trace, check_force_sign
-
-DRIVES = ("travel", "spring", "force")
+from ._io import DRIVES, Trace, check_force_sign
 
 FIT_SETTINGS = lubjax.Settings(rtol=3e-4, force_floor=1e-5, max_steps=5000,
                                film_error="relative")
@@ -498,7 +496,7 @@ def drive_unit(trace: Trace, scales: Scales, drive: str) -> float:
 
 
 def make_drive(drive: str, unit, history, E_star):
-    """The lubjax drive of a trace: ``drive`` ("travel", "spring", "force"), its
+    """The lubjax drive of a trace: ``drive`` (one of ``DRIVES``), its
     :func:`drive_unit`, its input ``history`` and the modulus E* [Pa]."""
     if drive == "force":
         return lubjax.Load(unit / E_star, history)

@@ -117,9 +117,14 @@ def displacement(disc: Discretisation, pressure):
     return -disc.influence @ pressure
 
 
+def elastic_part(disc: Discretisation, film, z):
+    """Ŵp̄ = -w̄ at the nodes, from the film: h̄ less its rigid part z̄ + r̄²/2 (eq 21)."""
+    return film - z - 0.5 * disc.r**2
+
+
 def film_at_midpoints(disc: Discretisation, film, z):
     """h̄ at the cell midpoints: the rigid part z̄ + r̄²/2 exactly, the elastic part interpolated."""
-    elastic = film - z - 0.5 * disc.r**2
+    elastic = elastic_part(disc, film, z)
     return z + 0.5 * disc.face_r**2 + 0.5 * (elastic[:-1] + elastic[1:])
 
 

@@ -187,7 +187,7 @@ def graded_mesh(
     return Mesh(tuple(float(x) for x in nodes))
 
 
-#: The default tolerance, and the mesh it gets (Settings: dr = 0.014, growth 1.05, L̄ = 577).
+#: The default tolerance, and the mesh it gets (Settings: dr = 0.014, growth 1.15, L̄ = 577).
 DEFAULT_RTOL = 1e-4
 
 #: From this β on, ``Settings.film_error="auto"`` (the default) holds the film inside a contact

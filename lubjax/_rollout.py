@@ -36,7 +36,7 @@ import numpy as np
 
 from . import _controller as ctrl
 from ._controller import DEFAULT_TOLERANCE, DONE, RUNNING, Tolerance
-from ._discretisation import Discretisation, film_thickness
+from ._discretisation import Discretisation, elastic_part, film_thickness
 from ._drives import as_drive
 from ._linear_call import linear_call
 from ._multistep import dense_output
@@ -220,7 +220,7 @@ def _initial_state(inputs: Inputs) -> State:
 def _series_of(disc, history: History, outflow, dissipation) -> Series:
     """The reported values of a history's newest level."""
     level = jax.tree_util.tree_map(lambda x: x[0], history)
-    elastic = level.film - level.gap - 0.5 * disc.r**2  # Ŵū = -w̄
+    elastic = elastic_part(disc, level.film, level.gap)  # Ŵū = -w̄
     return Series(
         force=level.force,
         film_center=level.film[0],

@@ -209,3 +209,17 @@ def test_fitting_uses_lubjax_through_its_public_surface():
         used |= set(re.findall(r"from lubjax\.(_\w+) import", text))
         used |= set(re.findall(r"from lubjax import (_\w+)", text))
     assert used and used <= allowed, used - allowed
+
+
+def test_the_film_and_the_drives_are_written_once():
+    """h̄ = z̄ + r̄²/2 + Ŵp̄ (eq 21) and its inverse live in lubjax/_discretisation.py
+    (film_thickness, elastic_part); the drives a fit knows in fitting/_io.py (DRIVES)."""
+    rigid = re.compile(r"0\.5 \* disc\.r\s*\*\*\s*2")
+    written = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "lubjax").glob("*.py")
+                     if rigid.search(p.read_text(encoding="utf-8")))
+    assert written == ["lubjax/_discretisation.py"]
+    drives = re.compile(r"\(\s*\"travel\",\s*\"spring\",\s*\"force\"\s*\)")
+    written = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "fitting").glob("*.py")
+                     if drives.search(p.read_text(encoding="utf-8")))
+    assert written == ["fitting/_io.py"]
+    assert fitting._model.DRIVES is fitting._io.DRIVES
