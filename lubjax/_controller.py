@@ -103,18 +103,20 @@ class Status(enum.IntEnum):
     """How a run stands; :func:`stop_reason` says it in words.
 
     Attributes:
-        RUNNING: still running (at the end of a run: the attempt budget ran out).
+        RUNNING: still running (inside the loop only).
         DONE: ``t_end`` reached.
         STEP_TOO_SMALL: the step size collapsed (every shorter step was rejected).
+        BUDGET_SPENT: the attempt budget (``Settings.max_steps``) ran out before ``t_end``.
     """
 
-    RUNNING = 0  # (at the end of a run: the attempt budget ran out)
+    RUNNING = 0
     DONE = 1
     STEP_TOO_SMALL = 2
+    BUDGET_SPENT = 3
 
 
 # Plain integers inside the compiled loop.
-RUNNING, DONE, STEP_TOO_SMALL = (int(s) for s in Status)
+RUNNING, DONE, STEP_TOO_SMALL, BUDGET_SPENT = (int(s) for s in Status)
 
 _STOP_REASONS = {
     Status.DONE: "",
@@ -123,7 +125,7 @@ _STOP_REASONS = {
         "positivity, or the local error estimate stayed above the tolerance); refine the "
         "mesh (Settings.dr) or check the parameters"
     ),
-    Status.RUNNING: (
+    Status.BUDGET_SPENT: (
         "the step budget Settings.max_steps = {max_steps} ran out; raise it "
         "(CLI: --max-steps) or shorten t_end"
     ),
@@ -140,8 +142,14 @@ def stop_reason(status, max_steps: int) -> str:
 
     Returns:
         The reason and what to change, or '' for a run that reached ``t_end``.
+
+    Raises:
+        ValueError: ``status`` is ``RUNNING`` (only a loop in progress is).
     """
-    return _STOP_REASONS[Status(int(status))].format(max_steps=max_steps)
+    status = Status(int(status))
+    if status not in _STOP_REASONS:
+        raise ValueError(f"a run still {status.name} has not stopped")
+    return _STOP_REASONS[status].format(max_steps=max_steps)
 
 
 class ControllerState(NamedTuple):

@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _controller as ctrl
-from ._controller import DEFAULT_TOLERANCE, DONE, RUNNING, Tolerance
+from ._controller import BUDGET_SPENT, DEFAULT_TOLERANCE, DONE, RUNNING, Tolerance
 from ._discretisation import Discretisation, elastic_part, film_thickness
 from ._drives import as_drive
 from ._linear_call import linear_call
@@ -391,7 +391,7 @@ def _loop(inputs: Inputs, record: bool):
         profiles=profiles.pressure,
         profile_gaps=profiles.gap,
         profile_films=profiles.film,
-        status=final.status,
+        status=jnp.where(final.status == RUNNING, BUDGET_SPENT, final.status),
         accepted=final.accepted,
         rejected=final.rejected,
         t_final=final.t,

@@ -87,7 +87,9 @@ def test_reports_collapse():
 def test_stop_reasons_name_the_cause():
     assert ctrl.stop_reason(ctrl.DONE, 100) == ""
     assert "collapsed" in ctrl.stop_reason(ctrl.STEP_TOO_SMALL, 100)
-    assert "max_steps = 123" in ctrl.stop_reason(ctrl.RUNNING, 123)
+    assert "max_steps = 123" in ctrl.stop_reason(ctrl.BUDGET_SPENT, 123)
+    with pytest.raises(ValueError):  # a finished run is never left "running"
+        ctrl.stop_reason(ctrl.RUNNING, 123)
 
 
 def test_relax_reports_the_controllers_reason():
@@ -95,7 +97,7 @@ def test_relax_reports_the_controllers_reason():
         max_steps=30, error_estimate=False, dr=0.1, length=50.0, mesh_growth=1.2,
         contact_radius=None), check="flag")
     assert not res.finished
-    assert res.stop_reason == ctrl.stop_reason(ctrl.RUNNING, 30)
+    assert res.stop_reason == ctrl.stop_reason(ctrl.BUDGET_SPENT, 30)
     assert any(res.stop_reason in p for p in res.problems())
 
 
