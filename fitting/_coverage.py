@@ -11,19 +11,20 @@ from __future__ import annotations
 import numpy as np
 
 from ._fit import fit_traces
-from ._model import FIT_SETTINGS
+from ._model import FIT_SETTINGS, drive_of
 
 
 def noise_draws(clean, n, rho=0.0, fraction=0.01, seed=2024):
-    """Noisy copies of a clean trace: stationary AR(1) noise on the force,
-    n_k = ρ n_{k-1} + √(1-ρ²) σ ε_k with ε_k standard normal. Seeded: the same arguments give
-    the same draws.
+    """Noisy copies of a clean trace: stationary AR(1) noise on the response channel (the
+    force; the displacement under a prescribed load), n_k = ρ n_{k-1} + √(1-ρ²) σ ε_k with ε_k
+    standard normal. Seeded: the same arguments give the same draws.
 
     Args:
         clean: the noiseless :class:`Trace`.
         n: the number of copies, ≥ 1.
         rho: ρ, the lag-1 autocorrelation, in [0, 1) (default 0: white noise).
-        fraction: the marginal σ as a fraction of the peak force (default 0.01).
+        fraction: the marginal σ as a fraction of the response's largest magnitude (default
+            0.01).
         seed: the random generator's seed (default 2024).
 
     Returns:
@@ -37,7 +38,9 @@ def noise_draws(clean, n, rho=0.0, fraction=0.01, seed=2024):
     if n < 1:
         raise ValueError(f"n must be at least 1, got {n!r}")
     rng = np.random.default_rng(seed)
-    sigma = fraction * float(np.max(clean.force))
+    channel = "displacement" if drive_of(clean) == "force" else "force"
+    response = getattr(clean, channel)
+    sigma = fraction * float(np.max(np.abs(response)))
     out = []
     for k in range(n):
         e = rng.normal(0.0, sigma, clean.force.size)
@@ -45,7 +48,7 @@ def noise_draws(clean, n, rho=0.0, fraction=0.01, seed=2024):
         noise[0] = e[0]
         for i in range(1, e.size):
             noise[i] = rho * noise[i - 1] + np.sqrt(1 - rho**2) * e[i]
-        out.append(clean._replace(force=clean.force + noise, name=f"draw{k}"))
+        out.append(clean._replace(**{channel: response + noise}, name=f"draw{k}"))
     return out
 
 
@@ -61,7 +64,9 @@ def coverage(draws, truth, settings=FIT_SETTINGS, **fit_kwargs):
 
     Returns:
         dict: ``table`` (per parameter of ``truth``: ``rms_z`` of the reported errors,
-        ``rms_z_white`` of their white-noise part alone, ``mean_bias_over_se``,
+        ``within_1sigma`` and ``within_2sigma``, the fractions of draws with |z| ≤ 1 and ≤ 2
+        (honest errors: 68 % and 95 %), ``rms_z_white`` of their white-noise part alone,
+        ``mean_bias_over_se``,
         ``scatter_over_se`` and ``solver_over_se``, each over the mean reported error),
         ``converged`` (how many), ``n``, ``noise_models`` (those chosen) and ``lag1`` (the mean
         lag-1 autocorrelation of the residuals).
@@ -74,8 +79,11 @@ def coverage(draws, truth, settings=FIT_SETTINGS, **fit_kwargs):
         white = np.array([r.stats["error_parts"]["white"][name] for r in results])
         solver = np.array([r.stats["error_parts"].get("solver", {}).get(name, 0.0)
                            for r in results])
+        z = (est - true) / se
         table[name] = dict(
-            rms_z=float(np.sqrt(np.mean(((est - true) / se) ** 2))),
+            rms_z=float(np.sqrt(np.mean(z**2))),
+            within_1sigma=float(np.mean(np.abs(z) <= 1.0)),
+            within_2sigma=float(np.mean(np.abs(z) <= 2.0)),
             rms_z_white=float(np.sqrt(np.mean(((est - true) / white) ** 2))),
             mean_bias_over_se=float(np.mean(est - true) / np.mean(se)),
             scatter_over_se=float(np.std(est, ddof=1) / np.mean(se)),

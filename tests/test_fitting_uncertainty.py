@@ -104,3 +104,18 @@ def test_noise_draws_are_seeded_ar1_of_the_given_size():
     assert abs(np.corrcoef(white[1:], white[:-1])[0, 1]) < 0.03
     with pytest.raises(ValueError, match="rho"):
         noise_draws(clean, 1, rho=1.0)
+
+
+def test_noise_draws_go_on_the_response_channel():
+    """Under a prescribed load the force is the command and the displacement the measured
+    response: the noise goes there, σ = fraction × its largest magnitude; otherwise on the force."""
+    n = 2000
+    t = np.linspace(0.0, 1.0, n)
+    creep = fitting.make_trace(t, 2e-5 * t, np.ones(n), 1e-3, metadata={"drive": "force"})
+    draw = noise_draws(creep, 1, fraction=0.01, seed=3)[0]
+    np.testing.assert_array_equal(draw.force, creep.force)
+    assert np.std(draw.displacement - creep.displacement) == pytest.approx(2e-7, rel=0.1)
+    travel = fitting.make_trace(t, 2e-5 * t, np.ones(n), 1e-3)
+    draw = noise_draws(travel, 1, fraction=0.01, seed=3)[0]
+    np.testing.assert_array_equal(draw.displacement, travel.displacement)
+    assert np.std(draw.force - travel.force) == pytest.approx(0.01, rel=0.1)
