@@ -39,7 +39,6 @@ Uncertainties: :mod:`fitting._stats`.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import time
@@ -961,8 +960,7 @@ def _solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, mesh, gro
     model (the response only: no Jacobian) on the other solver."""
     mesh = mesh.coarsened()
     tol = settings.tolerance()
-    loose = _model.Solver(lubjax.stepper.discretise(mesh),
-                          dataclasses.replace(tol, rtol=min(8 * tol.rtol, 0.1)))
+    loose = _model.Solver(lubjax.stepper.discretise(mesh), tol.loosened())
     data = _stack_traces(traces, scales, spec, mesh)
     # The response alone (no Jacobian): a forward run, a quarter of the cost and of the tracing.
     predict = evaluate.batched(1, "predict")

@@ -92,6 +92,10 @@ class Tolerance:
     force_floor: float = 1e-8
     film_error: str = "auto"
 
+    def loosened(self) -> Tolerance:
+        """The error estimate's time-coarsened partner: rtol × 8 (at most 0.1), the rest as is."""
+        return dataclasses.replace(self, rtol=min(8 * self.rtol, 0.1))
+
 
 register(Tolerance, data=("rtol", "atol", "initial_step", "force_floor"),
          static=("order", "max_steps", "film_error"))

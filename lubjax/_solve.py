@@ -675,7 +675,7 @@ def relax(
     runs = [(disc, tol, ptimes)]
     if settings.error_estimate:
         coarse = discretise(mesh.coarsened(), substrate_v)
-        loose = dataclasses.replace(tol, rtol=min(8 * tol.rtol, 0.1))
+        loose = tol.loosened()
         runs += [(coarse, tol, ptimes[:0]), (coarse, loose, ptimes[:0])]
     # With a derivative to take, the run itself goes through jit with its inputs' derivatives
     # attached; the error estimate's runs are not differentiated.
