@@ -93,7 +93,11 @@ class Tolerance:
     film_error: str = "auto"
 
     def loosened(self) -> Tolerance:
-        """The error estimate's time-coarsened partner: rtol × 8 (at most 0.1), the rest as is."""
+        """The error estimate's time-coarsened partner of this tolerance.
+
+        Returns:
+            Tolerance: rtol × 8 (at most 0.1), the rest as is.
+        """
         return dataclasses.replace(self, rtol=min(8 * self.rtol, 0.1))
 
 
