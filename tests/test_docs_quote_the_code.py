@@ -104,4 +104,5 @@ def test_the_coverage_table_is_where_the_trace_format_page_says():
     target = (ROOT / m["page"]).read_text(encoding="utf-8")
     section = target.split(f"### {m['heading']}\n", 1)
     assert len(section) == 2, f"{m['page']} has no section {m['heading']!r}"
-    assert "| noise | parameter | rms z, reported errors |" in section[1].split("\n## ", 1)[0]
+    assert "| scene | noise | converged | parameter | within 1σ | within 2σ |" in (
+        section[1].split("\n## ", 1)[0])
