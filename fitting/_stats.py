@@ -90,18 +90,28 @@ def summarise(r, J, sizes, labels, *, noise="auto", solver_error=None) -> dict:
     s2 = chi2 / dof
     A = JJ.T @ JJ
     flags = []
-    try:
-        inv = np.linalg.inv(A)
-    except np.linalg.LinAlgError:
+    finite = bool(np.all(np.isfinite(A)) and np.isfinite(chi2))
+    if not finite:
+        # a model run that failed at the optimum (NaN in its response or Jacobian): say so
+        # rather than let the linear algebra below raise and lose the fit
         inv = np.full_like(A, np.nan)
-        flags.append("JᵀJ is singular: no standard errors")
+        flags.append("the model's residuals or Jacobian are not finite at the optimum: "
+                     "no standard errors")
+    else:
+        try:
+            inv = np.linalg.inv(A)
+        except np.linalg.LinAlgError:
+            inv = np.full_like(A, np.nan)
+            flags.append("JᵀJ is singular: no standard errors")
     cov_white = s2 * inv
     rhos = [lag1(r[s : s + k]) for s, k in blocks]
     rho = float(np.sum([k * q for (_, k), q in zip(blocks, rhos)]) / n)
     correlated = abs(rho) > WHITE_THRESHOLD / math.sqrt(n)
     use = noise if noise != "auto" else ("ar1" if correlated else "white")
     parts = {"white": cov_white}
-    if use == "ar1":
+    if use == "ar1" and not finite:
+        cov_noise = parts["ar1"] = np.full_like(A, np.nan)
+    elif use == "ar1":
         meat = np.zeros_like(A)
         for (s, k), q in zip(blocks, rhos):
             Jb = J[s : s + k]
@@ -125,7 +135,8 @@ def summarise(r, J, sizes, labels, *, noise="auto", solver_error=None) -> dict:
     off = np.abs(corr - np.eye(p))
     dg = np.sqrt(np.abs(np.diag(A)))
     with np.errstate(invalid="ignore", divide="ignore"):
-        cond = float(np.linalg.cond(A / np.outer(dg, dg))) if np.all(dg > 0) else math.inf
+        scaled_ok = finite and np.all(dg > 0)
+        cond = float(np.linalg.cond(A / np.outer(dg, dg))) if scaled_ok else math.inf
     n_eff = n * (1 - rho) / (1 + rho) if use == "ar1" else float(n)
     stats = dict(
         n_samples=int(n), n_parameters=int(p), dof=int(dof), chi2=chi2, reduced_chi2=s2,

@@ -119,3 +119,17 @@ def test_noise_draws_go_on_the_response_channel():
     draw = noise_draws(travel, 1, fraction=0.01, seed=3)[0]
     np.testing.assert_array_equal(draw.displacement, travel.displacement)
     assert np.std(draw.force - travel.force) == pytest.approx(0.01, rel=0.1)
+
+
+@pytest.mark.parametrize("noise", ["auto", "ar1"])
+def test_a_non_finite_jacobian_is_flagged_not_raised(noise):
+    """A model run that failed at the optimum leaves NaN in the Jacobian: the summary says so
+    and gives no standard errors, where the condition number's SVD raised and lost every fit
+    of the batch."""
+    n = 100
+    X = np.stack([np.ones(n), np.linspace(0, 1, n)], axis=1)
+    X[7, 1] = np.nan
+    out = _stats.summarise(np.random.default_rng(2).normal(size=n), X, [(n, n)], ["a", "b"],
+                           noise=noise, solver_error=np.zeros(n))
+    assert any("not finite" in f for f in out["flags"])
+    assert np.all(np.isnan(out["covariance"])) and out["condition"] == np.inf
