@@ -52,8 +52,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from lubjax._files import MAX_TRAVEL_OVER_RADIUS, write_text
+from lubjax._files import write_text
 from lubjax._fitting_api import checks as _checks
+
+MAX_TRAVEL_OVER_RADIUS = _checks.MAX_TRAVEL_OVER_RADIUS
 
 COLUMNS = ("time_s", "displacement_m", "force_N")
 MIN_ROWS = 10

@@ -33,6 +33,9 @@ LAYER_BASES = ("bonded", "frictionless")
 """How a layer rests on its rigid base: no slip ("bonded"), or free to slide ("frictionless")."""
 FILM_ERRORS = ("auto", "relative", "force")
 """What a film's local error may be measured against (``Settings.film_error``)."""
+MAX_TRAVEL_OVER_RADIUS = 0.2
+"""The paraboloid and thin-film model need travel and gap ≪ R: inputs (SI) with d_c or z0 above
+this × R are refused."""
 
 
 def is_traced(value) -> bool:

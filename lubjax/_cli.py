@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from ._checks import MAX_TRAVEL_OVER_RADIUS
 from ._cli_options import (
     POISSON_TEXT,
     accuracy_settings,
@@ -35,7 +36,6 @@ from ._cli_options import (
 )
 from ._files import (
     EXIT_EPILOG,
-    MAX_TRAVEL_OVER_RADIUS,
     Parser,
     UsageError,
     atomic_open,

@@ -36,9 +36,6 @@ EXIT_USAGE = 2  # bad usage or input: nothing was computed and nothing written
 #: Plot formats matplotlib writes (by file extension); anything else is refused up front.
 PLOT_FORMATS = ("png", "pdf", "svg", "svgz", "eps", "ps", "jpg", "jpeg", "tif", "tiff", "webp")
 
-#: The thin-film model needs travel and gap ≪ R: inputs with d_c or z0 above this × R are refused.
-MAX_TRAVEL_OVER_RADIUS = 0.2
-
 EXIT_EPILOG = """\
 exit status:
   0  success
