@@ -637,7 +637,7 @@ def _dispatch(args) -> int:
 
 
 def _si_test(args):
-    from ._units import RelaxationTest, plane_strain_modulus
+    from ._units import RelaxationTest
 
     if args.E_star is not None and (args.E is not None or args.poisson is not None):
         raise UsageError("give either --E-star or --E with --poisson, not both")
@@ -647,15 +647,10 @@ def _si_test(args):
         missing.append("E-star (or --E with --poisson)")
     if missing:
         raise UsageError("SI mode needs --" + ", --".join(missing))
-    e_star = args.E_star if args.E_star is not None else plane_strain_modulus(args.E, args.poisson)
-    test = RelaxationTest(e_star, args.radius, args.viscosity, args.speed, args.indent, args.gap)
+    test = RelaxationTest(_modulus(args), args.radius, args.viscosity, args.speed, args.indent,
+                          args.gap)
     for name, value in [("--indent", test.indent), ("--gap", test.gap)]:
-        if value > MAX_TRAVEL_OVER_RADIUS * test.radius:
-            raise UsageError(
-                f"{name} {value:g} m is {value / test.radius:.3g} radii (--radius {test.radius:g} "
-                f"m); the thin-film model needs it ≪ R (at most {MAX_TRAVEL_OVER_RADIUS:g} R). "
-                "Are the lengths in metres?"
-            )
+        _check_thin(name, value, test.radius)
     return test
 
 
