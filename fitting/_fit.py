@@ -952,12 +952,16 @@ def fit_trace(trace: Trace, **kwargs) -> FitResult:
 def _solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, mesh, groups):
     """Signed error of the model response at the optimum, per problem in residual units.
 
-    One extra run on the nested coarse mesh (every other node) at 8·rtol: the spatial error is
-    second order (×4 at twice the spacing) and the global time error ∝ rtol^{2/3} (×4 at 8·rtol),
-    so both grow by the same factor and y_coarse,8rtol - y ≈ 3 (error of y): the error is
-    (y_coarse,8rtol - y)/3, the estimate ``lubjax.relax`` makes in two runs, in one. In residual
-    units (r = w (y - y_data)/σ) that is (r_coarse,8rtol - r)/3; the run is the fit's own
-    model (the response only: no Jacobian) on the other solver."""
+    One extra run on the nested coarse mesh (every other node) at ``Tolerance.loosened()``
+    (8·rtol): taking the spatial error as second order (×4 at twice the spacing) and the global
+    time error ∝ rtol^{2/3} (×4 at 8·rtol), both grow by the same factor and
+    y_coarse,8rtol - y ≈ 3 (error of y), so the error is (y_coarse,8rtol - y)/3. This is not
+    ``lubjax.relax``'s estimate (``lubjax._solve.error_estimate``: two runs, separate space and
+    time parts at the lower orders 3/2 and 1/2, times a safety factor of 3), which bounds the
+    error pointwise; here the signed error enters the budget as a parameter shift
+    (:func:`fitting._stats.summarise`), where a bound would be too large. In residual units
+    (r = w (y - y_data)/σ) it is (r_coarse,8rtol - r)/3; the run is the fit's own model (the
+    response only: no Jacobian) on the other solver."""
     mesh = mesh.coarsened()
     tol = settings.tolerance()
     loose = _model.Solver(lubjax.stepper.discretise(mesh), tol.loosened())
