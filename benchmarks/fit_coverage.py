@@ -88,11 +88,11 @@ def main(argv=None):
     p.add_argument("--t-bar", type=float, default=3.0)
     args = _harness.parse(p, argv)
 
+    cleans = {name: clean_trace(SCENES[name].stem, args.t_bar) for name in args.scenes}
     rows = []
     for rho in args.rho:  # every scene's white-noise row first
-        for name in args.scenes:
+        for name, clean in cleans.items():
             scene = SCENES[name]
-            clean = clean_trace(scene.stem, args.t_bar)
             truth = {n: float(clean.metadata[TRUE[n]]) for n in scene.parameters}
             start = time.perf_counter()
             out = fitting.coverage(fitting.noise_draws(clean, args.draws, rho), truth,

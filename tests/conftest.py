@@ -1,6 +1,7 @@
 import os
 
 import jax
+import pytest
 
 jax.config.update("jax_enable_x64", True)
 # The command lines turn on JAX's persistent compilation cache (in ~/.cache/lubjax/jax); tests
@@ -17,8 +18,6 @@ def pytest_addoption(parser):
 
 
 def pytest_collection_modifyitems(config, items):
-    import pytest
-
     if config.getoption("--doc-commands"):
         return
     skip = pytest.mark.skip(reason="a documented command: run with --doc-commands (CI does)")
