@@ -1,16 +1,19 @@
 r"""Step-size control: the tolerance, the error norm, the PI controller, and how a run ends.
 
-The step (:func:`lubjax._stepper.step`) returns a candidate level with Milne estimates of its
-local error (:mod:`lubjax._multistep`); here
+A run's :class:`Controller` is three calls, with its memory in an opaque
+:class:`ControllerState` (the running peaks inside)::
 
-* :func:`error_ratio` scales those estimates into one number ε (≤ 1: within tolerance);
-* :func:`admissible` says whether the candidate may be kept at all (finite, positive film, no
-  negative force where the drive only squeezes);
-* :func:`adapt` decides: accept or reject, the next Δt̄, a restart after a breakpoint, and the
-  run's :class:`Status`;
-* :func:`propose` lands the next attempt on the history's next velocity jump, and
-  :func:`choose_order` picks each attempt's formula (backward Euler where the film collapses
-  too fast for BDF2 to stay positive: :func:`film_collapses`).
+    state    = controller.init(velocity, dtype)
+    attempt  = controller.propose(state, t, history)     # t_new, lands, order
+    decision = controller.adapt(state, t, attempt, candidate, history, status)
+
+``propose`` lands the attempt on the history's next velocity jump (:func:`propose_end`) and picks
+its formula (:func:`choose_order`: backward Euler where the film collapses too fast for BDF2 to
+stay positive, :func:`film_collapses`). ``adapt`` scales the step's Milne estimates
+(:mod:`lubjax._multistep`) into one ratio ε (:func:`error_ratio`, ≤ 1: within tolerance), checks
+that the candidate may be kept at all (:func:`admissible`: finite, positive film, no negative
+force where the drive only squeezes), and decides (:func:`decide`): accept or reject, the next Δt̄,
+a restart after a breakpoint, and the run's :class:`Status`.
 
 Controller: the PI controller of Gustafsson (Hairer & Wanner II §IV.2; diffrax's
 ``PIDController`` with ``pcoeff = 0.4, icoeff = 0.3``), on the error ratio ε:
@@ -31,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 from typing import NamedTuple
 
 import jax
@@ -160,15 +164,6 @@ def stop_reason(status, max_steps: int) -> str:
     return _STOP_REASONS[status].format(max_steps=max_steps)
 
 
-class ControllerState(NamedTuple):
-    """The controller's memory between attempts."""
-
-    dt_next: jax.Array  # the next attempt's Δt̄
-    error_prev: jax.Array  # ε of the last accepted step (the PI controller's integral term)
-    last_rejected: jax.Array  # do not grow straight after a rejection
-    since_restart: jax.Array  # accepted steps since the last (re)start: 0, 1, 2, ...
-
-
 class Peaks(NamedTuple):
     """Running maxima the error norm scales by."""
 
@@ -177,8 +172,104 @@ class Peaks(NamedTuple):
     excursion: jax.Array  # max |z̄ - z̄_start| so far (a free gap's scale)
 
 
+class ControllerState(NamedTuple):
+    """The controller's memory between attempts; the loop carries it without looking inside."""
+
+    dt_next: jax.Array  # the next attempt's Δt̄
+    error_prev: jax.Array  # ε of the last accepted step (the PI controller's integral term)
+    last_rejected: jax.Array  # do not grow straight after a rejection
+    since_restart: jax.Array  # accepted steps since the last (re)start: 0, 1, 2, ...
+    peaks: Peaks  # running maxima of the accepted levels
+
+
+class Attempt(NamedTuple):
+    """Where the next attempt goes: its end, whether that is a velocity jump (or t_end), and
+    its formula."""
+
+    t_new: jax.Array
+    lands: jax.Array
+    order: jax.Array
+
+
 class Decision(NamedTuple):
-    """What :func:`adapt` decides about one attempt."""
+    """What :meth:`Controller.adapt` decides about one attempt."""
+
+    accept: jax.Array
+    state: ControllerState  # the controller's state after the attempt, kept or not
+    status: jax.Array  # the run's status after the attempt
+
+
+class Controller(NamedTuple):
+    """The step-size controller of one run: :meth:`init`, then per attempt :meth:`propose`
+    (where it goes, which formula) and :meth:`adapt` (keep it or not, what next).
+
+    Attributes:
+        tol: the :class:`Tolerance`.
+        drive: the run's drive (what its error norm and admissibility depend on).
+        beta: β (may be traced).
+        z0: z̄0 (may be traced).
+        t_end: the run's final time t̄.
+    """
+
+    tol: Tolerance
+    drive: object
+    beta: jax.Array
+    z0: jax.Array
+    t_end: jax.Array
+
+    def init(self, velocity, dtype) -> ControllerState:
+        """The state at rest: a restart step, no error history, peaks of the initial level
+        (``velocity`` is v̄ at t̄_start)."""
+        return ControllerState(
+            dt_next=jax.lax.stop_gradient(restart_step(self.tol, self.beta)),
+            error_prev=jnp.asarray(1.0, dtype),
+            last_rejected=jnp.asarray(False),
+            since_restart=jnp.asarray(0, jnp.int32),
+            peaks=Peaks(force=jnp.zeros((), dtype), velocity=jnp.abs(velocity),
+                        excursion=jnp.zeros_like(self.gap_start(dtype))),
+        )
+
+    def gap_start(self, dtype):
+        """z̄ at t̄_start."""
+        return jnp.asarray(self.drive.initial_gap(self.z0), dtype)
+
+    def propose(self, state: ControllerState, t, history) -> Attempt:
+        """The next attempt from the accepted ``history`` at ``t``: :func:`propose_end`
+        lands it on a velocity jump, :func:`choose_order` picks its formula."""
+        t_new, lands = propose_end(t, state.dt_next, self.drive.breakpoints_array(),
+                                   self.t_end)
+        previous = jax.tree_util.tree_map(lambda x: x[0], history)
+        order = choose_order(state, previous.force, state.peaks, self.tol.order, history,
+                             t_new - t)
+        return Attempt(t_new, lands, order)
+
+    def adapt(self, state: ControllerState, t, attempt: Attempt, candidate, history,
+              status) -> Decision:
+        """Keep the ``candidate`` of an attempt t → ``attempt.t_new`` or not, and the
+        controller's next state: the error norm (:func:`film_scale`, :func:`error_ratio`),
+        positivity (:func:`admissible`), the PI decision (:func:`decide`) and, if kept, the
+        peaks (:func:`update_peaks`)."""
+        level = candidate.level
+        previous = jax.tree_util.tree_map(lambda x: x[0], history)
+        gap_start = self.gap_start(level.gap.dtype)
+        film = film_scale(level, previous, self.tol.film_error, self.beta)
+        ratio = error_ratio(candidate.estimate, level, previous, state.peaks, self.tol,
+                            self.drive, gap_start, film)
+        valid = admissible(level, state.peaks, self.drive)
+        d = decide(ratio, valid, state, attempt.order, t, attempt.t_new, attempt.lands,
+                   self.t_end, status, restart_step(self.tol, self.beta))
+        kept = d.accepted._replace(peaks=update_peaks(state.peaks, level, gap_start))
+        return Decision(
+            accept=d.accept,
+            state=jax.tree_util.tree_map(functools.partial(jnp.where, d.accept), kept,
+                                         d.rejected),
+            status=jnp.where(d.accept, d.status_accepted, d.status_rejected),
+        )
+
+
+class Verdict(NamedTuple):
+    """What :func:`decide` finds: acceptance, and the controller's state and the run's status
+    either way."""
 
     accept: jax.Array
     accepted: ControllerState  # the controller's state if the step is kept ...
@@ -192,16 +283,7 @@ def restart_step(tol: Tolerance, beta):
     return tol.initial_step / jnp.maximum(1.0, beta)
 
 
-def initial_controller(tol: Tolerance, beta, dtype) -> ControllerState:
-    return ControllerState(
-        dt_next=jax.lax.stop_gradient(restart_step(tol, beta)),
-        error_prev=jnp.asarray(1.0, dtype),
-        last_rejected=jnp.asarray(False),
-        since_restart=jnp.asarray(0, jnp.int32),
-    )
-
-
-def propose(t, dt_next, breakpoints, t_end):
+def propose_end(t, dt_next, breakpoints, t_end):
     """The next attempt's end t_new and whether it lands on the next velocity jump (or t_end):
     a step that would pass it is shortened to end there."""
     later = jnp.where(breakpoints > t, breakpoints, jnp.inf)
@@ -378,8 +460,8 @@ def admissible(level, peaks: Peaks, drive):
     )
 
 
-def adapt(error, valid, controller: ControllerState, order, t, t_new, lands, t_end, status,
-          first_step) -> Decision:
+def decide(error, valid, controller: ControllerState, order, t, t_new, lands, t_end, status,
+           first_step) -> Verdict:
     """Accept or reject an attempt t → ``t_new`` of error ratio ``error``; the next Δt̄.
 
     A segment's first step (after t̄_start or a breakpoint) has no estimate: it is accepted if
@@ -405,9 +487,9 @@ def adapt(error, valid, controller: ControllerState, order, t, t_new, lands, t_e
     dt_next = jax.lax.stop_gradient(jnp.where(restart, first_step, dt_next))
     floor = jnp.maximum(1e-12 * first_step, 1e-13 * jnp.abs(t))
     too_small = ~accept & (dt_next < floor)
-    return Decision(
+    return Verdict(
         accept=accept,
-        accepted=ControllerState(
+        accepted=controller._replace(
             dt_next=dt_next,
             error_prev=jnp.maximum(error, 1e-4),
             last_rejected=jnp.asarray(False),

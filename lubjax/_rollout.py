@@ -2,12 +2,11 @@ r"""The loop over attempted steps, the saver, reading a run at any time, and its
 
 Each attempt (:func:`_attempt`) is the shape diffrax's loop has:
 
-    t_new, lands = propose(...)                  # the controller lands breakpoints
-    candidate    = step(...)                     # one factorisation: a candidate level + error
-    ratio        = error_ratio(...)              # the error norm
-    decision     = adapt(ratio, ...)             # accept or reject, next Δt̄, status
-    state        = where(accept, new, kept)      # one tree_map
-    entry        = the output entry of the attempt (the saver)
+    attempt   = controller.propose(...)          # lands breakpoints, picks the formula
+    candidate = step(...)                        # one factorisation: a candidate level + error
+    decision  = controller.adapt(...)            # error norm; accept or reject, next Δt̄, status
+    state     = where(accept, new, kept)         # one tree_map
+    entry     = the output entry of the attempt (the saver)
 
 The loop is a ``lax.while_loop`` that stops when the run is done. Its derivatives are those of
 the accepted steps alone, with the steps' times and formulae held fixed (the controller's
@@ -67,8 +66,8 @@ class State(NamedTuple):
         t: tⁿ, the last accepted time t̄ (units of t_c).
         history: the accepted levels the BDF formula needs, newest first
             (``lubjax._stepper.History`` of ``Level``).
-        peaks: running maxima the error norm scales by (``lubjax._controller.Peaks``).
-        controller: the step-size controller's memory (``lubjax._controller.ControllerState``).
+        controller: the step-size controller's state (``lubjax._controller.ControllerState``,
+            the running peaks inside).
         accepted: the number of accepted steps so far.
         rejected: the number of rejected attempts so far.
         status: how the run stands (:class:`Status`, as an integer).
@@ -78,7 +77,6 @@ class State(NamedTuple):
 
     t: jax.Array
     history: History  # accepted levels, newest first (lubjax._stepper.Level)
-    peaks: ctrl.Peaks  # running maxima the error norm scales by
     controller: ctrl.ControllerState
     accepted: jax.Array  # counters
     rejected: jax.Array
@@ -199,9 +197,7 @@ def _initial_state(inputs: Inputs) -> State:
     return State(
         t=jnp.asarray(drive.t_start, dtype),
         history=start_history(rest, tol.order),
-        peaks=ctrl.Peaks(force=scalar_zero, velocity=jnp.abs(v0),
-                         excursion=jnp.zeros_like(z_start)),
-        controller=ctrl.initial_controller(tol, inputs.beta, dtype),
+        controller=_controller(inputs).init(v0, dtype),
         accepted=integer(0),
         rejected=integer(0),
         status=integer(RUNNING),
@@ -262,32 +258,28 @@ def _save_profiles(profiles: Profiles, t, t_new, history: History, candidate,
     )
 
 
+def _controller(inputs: Inputs) -> ctrl.Controller:
+    return ctrl.Controller(inputs.tol, inputs.drive, inputs.beta, inputs.z0, inputs.t_end)
+
+
 def _attempt(inputs: Inputs, state: State, k):
     """Attempt one step from ``state``; returns the new state, output entry ``k + 1`` and
     the attempt's formula."""
-    disc, beta, drive, tol = inputs.disc, inputs.beta, inputs.drive, inputs.tol
-    t, controller = state.t, state.controller
-    t_new, lands = ctrl.propose(t, controller.dt_next, drive.breakpoints_array(), inputs.t_end)
-    previous = jax.tree_util.tree_map(lambda x: x[0], state.history)
-    order = ctrl.choose_order(controller, previous.force, state.peaks, tol.order,
-                              state.history, t_new - t)
-    candidate = step(disc, beta, drive, inputs.substrate, state.history, t, t_new, order,
-                     tol.order)
-    gap_start = jnp.asarray(drive.initial_gap(inputs.z0), candidate.level.gap.dtype)
-    film_scale = ctrl.film_scale(candidate.level, previous, tol.film_error, beta)
-    ratio = ctrl.error_ratio(candidate.estimate, candidate.level, previous, state.peaks, tol,
-                             drive, gap_start, film_scale)
-    valid = ctrl.admissible(candidate.level, state.peaks, drive)
-    decision = ctrl.adapt(ratio, valid, controller, order, t, t_new, lands, inputs.t_end,
-                          state.status, ctrl.restart_step(tol, beta))
+    disc = inputs.disc
+    t, controller = state.t, _controller(inputs)
+    attempt = controller.propose(state.controller, t, state.history)
+    t_new, order = attempt.t_new, attempt.order
+    candidate = step(disc, inputs.beta, inputs.drive, inputs.substrate, state.history, t, t_new,
+                     order, inputs.tol.order)
+    decision = controller.adapt(state.controller, t, attempt, candidate, state.history,
+                                state.status)
     new = State(
         t=t_new,
         history=push(state.history, candidate.level),
-        peaks=ctrl.update_peaks(state.peaks, candidate.level, gap_start),
-        controller=decision.accepted,
+        controller=decision.state,
         accepted=state.accepted + 1,
         rejected=state.rejected,
-        status=decision.status_accepted,
+        status=decision.status,
         output=Output(
             entries=jnp.stack([jnp.asarray(k + 1, jnp.int32), state.output.entries[0],
                                state.output.entries[1]]),
@@ -295,8 +287,8 @@ def _attempt(inputs: Inputs, state: State, k):
                                     inputs.profile_times),
         ),
     )
-    kept = state._replace(controller=decision.rejected, rejected=state.rejected + 1,
-                          status=decision.status_rejected)
+    kept = state._replace(controller=decision.state, rejected=state.rejected + 1,
+                          status=decision.status)
     accept = decision.accept
     out_state = jax.tree_util.tree_map(lambda a, b: jnp.where(accept, a, b), new, kept)
     zero = jnp.zeros_like(t)

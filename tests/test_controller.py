@@ -15,16 +15,17 @@ TOL = ctrl.Tolerance(rtol=1e-4, atol=1e-9)
 
 
 def _controller(since_restart=5, error_prev=0.5, last_rejected=False, dt_next=0.1):
+    peaks = ctrl.Peaks(jnp.asarray(1.0), jnp.asarray(0.0), jnp.asarray(0.0))
     return ctrl.ControllerState(jnp.asarray(dt_next), jnp.asarray(error_prev),
-                                jnp.asarray(last_rejected), jnp.asarray(since_restart))
+                                jnp.asarray(last_rejected), jnp.asarray(since_restart), peaks)
 
 
 def _adapt(error, valid=True, controller=None, t=1.0, dt=0.1, lands=False, t_end=10.0,
            first_step=1e-7):
     controller = _controller() if controller is None else controller
-    return ctrl.adapt(jnp.asarray(error), jnp.asarray(valid), controller, 2, jnp.asarray(t),
-                      jnp.asarray(t + dt), jnp.asarray(lands), t_end,
-                      jnp.asarray(ctrl.RUNNING), first_step)
+    return ctrl.decide(jnp.asarray(error), jnp.asarray(valid), controller, 2, jnp.asarray(t),
+                       jnp.asarray(t + dt), jnp.asarray(lands), t_end,
+                       jnp.asarray(ctrl.RUNNING), first_step)
 
 
 def test_accepts_within_tolerance_and_rejects_beyond_it():
@@ -65,11 +66,11 @@ def test_a_segments_first_step_has_no_estimate():
 
 def test_lands_on_breakpoints_exactly_and_restarts_there():
     breakpoints = jnp.asarray([0.5, 2.0])
-    t_new, lands = ctrl.propose(jnp.asarray(0.3), jnp.asarray(1.0), breakpoints, 10.0)
+    t_new, lands = ctrl.propose_end(jnp.asarray(0.3), jnp.asarray(1.0), breakpoints, 10.0)
     assert float(t_new) == 0.5 and bool(lands)
-    t_new, lands = ctrl.propose(jnp.asarray(0.3), jnp.asarray(0.1), breakpoints, 10.0)
+    t_new, lands = ctrl.propose_end(jnp.asarray(0.3), jnp.asarray(0.1), breakpoints, 10.0)
     assert float(t_new) == pytest.approx(0.4) and not bool(lands)
-    t_new, lands = ctrl.propose(jnp.asarray(2.5), jnp.asarray(100.0), breakpoints, 10.0)
+    t_new, lands = ctrl.propose_end(jnp.asarray(2.5), jnp.asarray(100.0), breakpoints, 10.0)
     assert float(t_new) == 10.0 and bool(lands)  # t_end is landed on too
     d = _adapt(0.5, lands=True)
     assert float(d.accepted.dt_next) == 1e-7 and int(d.accepted.since_restart) == 0
