@@ -85,9 +85,14 @@ def _scenes(quick: bool):
         profiles): elastic and viscoelastic, orders 2 and 3."""
         import importlib
 
-        loop = importlib.import_module("lubjax._stepper")
-        if not hasattr(loop, "_initial_state"):  # the loop in its own module
-            loop = importlib.import_module("lubjax._rollout")
+        here = os.path.dirname(lj.__file__)
+        for name in ("_loop", "_rollout", "_stepper"):  # where the loop lived, newest first
+            # (by file: the editable install would import a module this revision lacks)
+            if os.path.exists(os.path.join(here, name + ".py")):
+                loop = importlib.import_module("lubjax." + name)
+                if hasattr(loop, "initial_state") or hasattr(loop, "_initial_state"):
+                    break
+        initial_state = getattr(loop, "initial_state", None) or loop._initial_state
         toolkit = getattr(lj, "stepper", lj)  # (older revisions export it at the top level)
         disc = toolkit.discretise(lj.uniform_mesh(0.05, 10.0))
         out = []
@@ -96,11 +101,11 @@ def _scenes(quick: bool):
                 tol = toolkit.Tolerance(order=order)
                 if hasattr(loop, "Inputs"):  # the loop's inputs in one record
                     def initial(s, t):
-                        return loop._initial_state(loop.Inputs(
+                        return initial_state(loop.Inputs(
                             disc, 100.0, 0.5, lj.Travel(), s, 1.0, t, jnp.zeros((0,))))
                 else:
                     def initial(s, t):
-                        return loop._initial_state(disc, 100.0, lj.Travel(), s, 0.5, t,
+                        return initial_state(disc, 100.0, lj.Travel(), s, 0.5, t,
                                                    jnp.zeros((0,)))
                 shape = jax.eval_shape(initial, substrate, tol)
                 out.append(sum(x.size * x.dtype.itemsize for x in jax.tree_util.tree_leaves(

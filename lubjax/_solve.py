@@ -30,8 +30,9 @@ from ._discretisation import Discretisation, discretise
 from ._drives import as_drive
 from ._indenter import RampHold, SampledTravel
 from ._mesh import Mesh, graded_mesh, mesh_for, mesh_from_tolerance
+from ._output import Step, evaluate, evaluate_host
 from ._pytree import register
-from ._rollout import Step, evaluate, evaluate_host, rollout
+from ._rollout import rollout
 from ._substrate import HalfSpace, as_substrate
 from ._threads import single_threaded_blas
 

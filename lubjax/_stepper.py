@@ -4,7 +4,7 @@ Every attempted step is the paper's *one* linear system, factorised once: the mo
 from known levels (eq 19), so the step is linear in p̄ⁿ⁺¹; a second back-substitution with the
 same factors corrects the mobility. :func:`step` returns the candidate level, Milne's estimates
 of its local error and what the dense output needs; whether it is kept, and the next Δt̄, is
-the controller's (:mod:`lubjax._controller`), the loop the rollout's (:mod:`lubjax._rollout`).
+the controller's (:mod:`lubjax._controller`), the loop the rollout's (:mod:`lubjax._loop`).
 
 Departures from the paper, and why:
 

@@ -27,7 +27,8 @@ from . import _compiler, _sharding
 from ._checks import check_parameter_arrays
 from ._controller import DONE
 from ._indenter import RampHold, SampledTravel
-from ._rollout import evaluate, rollout
+from ._output import evaluate
+from ._rollout import rollout
 from ._solve import Settings, _check_x64, make_plan
 from ._threads import single_threaded_blas
 

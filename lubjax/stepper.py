@@ -28,7 +28,9 @@ from ._controller import Status, Tolerance, stop_reason
 from ._discretisation import Discretisation, discretise, displacement, film_thickness
 from ._influence import force_weights, influence_matrix, kernel
 from ._layer import layer_influence_matrix
-from ._rollout import State, Step, Trajectory, evaluate, evaluate_host, rollout
+from ._loop import State
+from ._output import Step, Trajectory, evaluate, evaluate_host
+from ._rollout import rollout
 
 __all__ = [
     "Discretisation",

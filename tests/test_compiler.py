@@ -8,7 +8,8 @@ import pytest
 import lubjax
 from lubjax import _compiler
 from lubjax._discretisation import discretise
-from lubjax._rollout import evaluate_host, rollout
+from lubjax._output import evaluate_host
+from lubjax._rollout import rollout
 
 from helpers import COARSE
 

@@ -143,10 +143,10 @@ def test_history_push_shifts_every_field_by_one_level(order):
 
 
 def test_saver_shifts_entries_and_reads_profiles_by_the_steps_dense_output():
-    """The saver (lubjax/_rollout.py) on its own: on an accepted step t → t_new a profile time
+    """The saver (lubjax/_output.py) on its own: on an accepted step t → t_new a profile time
     inside (t, t_new] gets the step's interpolant of p̄, z̄ and h̄ (here exact: quadratic data, a
     BDF2 step); one outside keeps what it had."""
-    from lubjax._rollout import Profiles, _save_profiles
+    from lubjax._output import Profiles, save_profiles
     from lubjax._stepper import Candidate, Estimate
 
     n, t = 3, 1.0  # levels at t = 0.5, 0.8, 1.0; the new one at 1.25
@@ -167,7 +167,7 @@ def test_saver_shifts_entries_and_reads_profiles_by_the_steps_dense_output():
     candidate = Candidate(new, Estimate(*(jnp.zeros(()),) * 4), jnp.asarray(2), 0.0, 0.0)
     times = jnp.asarray([0.9, 1.1, 1.25, 1.3])
     before = Profiles(jnp.full((4, n), -1.0), jnp.full(4, -1.0), jnp.full((4, n), -1.0))
-    after = _save_profiles(before, jnp.asarray(t), jnp.asarray(t_new), history, candidate, times)
+    after = save_profiles(before, jnp.asarray(t), jnp.asarray(t_new), history, candidate, times)
     for j, s in enumerate(np.asarray(times)):
         inside = t < s <= t_new
         expect_p = np.asarray(q(s)) if inside else np.full(n, -1.0)
