@@ -56,6 +56,11 @@ from ._checks import check_number
 from ._indenter import RampHold
 from ._pytree import register
 
+#: A collision's thinnest film over its scale z̄0 ε^{2/5} (:meth:`FreeSphere.collision_film`):
+#: 0.24 measured at ε = 10⁻³ (St = 20-100), 10⁻⁴ (St = 10) and 10⁻⁵ (St = 20), converged
+#: (benchmarks/drives.py).
+COLLISION_FILM = 0.24
+
 
 def _check_history(history, name):
     if not (hasattr(history, "travel") and hasattr(history, "breakpoints_array")):
@@ -381,6 +386,41 @@ class FreeSphere(_Drive):
             An empty array.
         """
         return jnp.zeros((0,))
+
+    def final_depth(self, z0):
+        """How deep the sphere can press into the substrate, for the mesh rule
+        (:func:`lubjax.mesh_for`): Hertz's depth where an approaching sphere's kinetic energy
+        is all stored elastically, ½ v̄0²/G = (4π/15) δ̄^{5/2} (the film only takes energy
+        away), or where its weight balances Hertz's force, (2π/3) δ̄^{3/2} = W̄, whichever is
+        deeper.
+
+        Args:
+            z0: z̄0 = z0/d_c (unused: the energy and the weight set the depth).
+
+        Returns:
+            δ̄ (units of d_c), ≥ 0.
+        """
+        kinetic = 0.5 * self.velocity**2 / self.inverse_mass if self.velocity < 0 else 0.0
+        rebound = (15.0 * kinetic / (4.0 * math.pi)) ** 0.4
+        settled = (3.0 * self.weight / (2.0 * math.pi)) ** (2.0 / 3.0)
+        return max(rebound, settled)
+
+    def collision_film(self, z0, beta):
+        """The thinnest film of the collision, for the mesh rule: Davis, Serayssol & Hinch's
+        scale h̄ ≈ COLLISION_FILM z̄0 ε^{2/5}, with the elasticity parameter of this approach
+        ε = 2|v̄0|/(3π² β z̄0^{5/2}) (2/(3π²β) in the collision's scales, z̄0 = 1, v̄0 = -1).
+
+        Args:
+            z0: z̄0 = z0/d_c (eq 8e), the starting gap.
+            beta: β (eq 8e).
+
+        Returns:
+            h̄ (units of d_c), or None for a sphere that is not approaching.
+        """
+        if self.velocity >= 0:
+            return None
+        epsilon = 2.0 * abs(self.velocity) / (3.0 * math.pi**2 * beta * z0**2.5)
+        return COLLISION_FILM * z0 * epsilon**0.4
 
     def initial_gap(self, z0):
         """The gap at the start: z̄0.

@@ -238,7 +238,7 @@ def final_contact_radius(drive, z0, dr) -> float | None:
     (``drive.final_depth(z̄0)``): √(depth) for an indentation depth ≥ 0; 0 (refine the axis)
     when the sphere stops short of the surface by less than 50 dr², where the pressure spot,
     ≈ √(2 z̄) wide, would span fewer than ~10 cells; None otherwise (no contact, nothing thin
-    to resolve), and for a drive that does not know where it ends (a free sphere)."""
+    to resolve), and for a drive that does not know where it ends."""
     depth = drive.final_depth(z0)
     if depth is None:
         return None
@@ -320,6 +320,26 @@ def _contact_refinement(settings, drive, z0, beta, t_end) -> float | None:
     return rim
 
 
+#: A collision's thinnest film, h̄_c (:meth:`lubjax.FreeSphere.collision_film`), lies inside the
+#: contact of its rebound depth, radius ā, and its spatial error is
+#: |Δh̄_c|/h̄_c ≈ COLLISION_ERROR ā Δr̄_c²/h̄_c for an interior spacing Δr̄_c (measured against
+#: runs converged in Δr̄_c: 5.8e-4·... see benchmarks/drives.py; the larger of ε = 10⁻³ and 10⁻⁵).
+COLLISION_ERROR = 7.0
+#: ... held to COLLISION_TARGET × rtol (1 % at the default rtol).
+COLLISION_TARGET = 100.0
+
+
+def _collision_refinement(settings, drive, z0, beta, rim) -> float:
+    """How much finer than Δr̄ a collision's contact (radius ``rim``) must be for its thinnest
+    film: 1 to ``Settings.rim_refinement``."""
+    film = drive.collision_film(float(z0), beta)
+    if film is None or rim <= 0:
+        return 1.0
+    dr = settings.mesh_parameters()[0]
+    needed = dr * math.sqrt(COLLISION_ERROR * rim / (COLLISION_TARGET * settings.rtol * film))
+    return min(settings.rim_refinement, max(1.0, needed))
+
+
 #: The near-dry contact's interior spacing, in units of Δr̄ per unit r̄: at most
 #: max(Δr̄/contact_refinement, DRY_CONTACT_SLOPE · Δr̄ · r̄), Δr̄ at r̄ = 1/2 (:func:`mesh_for`).
 DRY_CONTACT_SLOPE = 2.0
@@ -339,6 +359,10 @@ def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
     ``DIMPLE_ERROR``): hardly at all for the default t̄ ≤ 5 run, up to ``rim_refinement`` and
     ``contact_refinement`` for holds to t̄ ~ 10³ at β ≳ 10³. With a number, that radius is
     refined by the same run-dependent factors; with None, nothing is.
+
+    A free sphere's collision (where its film is held to itself) has the contact of its rebound
+    depth (``FreeSphere.final_depth``) refined inside and at its edge for the collision's
+    thinnest film (``COLLISION_ERROR``, ``COLLISION_TARGET``), up to ``rim_refinement``.
 
     Where the film inside an indenting contact is held through the force (near dry:
     ``Settings.film_error`` "auto" from β = ``NEAR_DRY_BETA`` on, or "force";
@@ -379,6 +403,13 @@ def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
     check_number("t_end", t_end, 0.0, T_END_MAX, lo_open=True)
     beta, t_end = float(beta), float(t_end)
     rim = _contact_edge(settings, drive, z0)
+    if drive.inertia:  # a free sphere: a collision, not a contact the run ends in
+        rim = rim if settings.contact_radius == "auto" else None
+        if rim is not None and not film_held_by_force(settings.film_error, beta):
+            collision = _collision_refinement(settings, drive, z0, beta, rim)
+            return settings.mesh(rim, collision, collision)
+        return settings.mesh(None, _interior_refinement(settings, beta, t_end),
+                             _rim_refinement(settings, beta, t_end))
     if rim is not None and rim > 0 and film_held_by_force(settings.film_error, beta):
         # Near dry the film inside the contact is held only through the force, so the mesh is
         # refined for the force of a contact growing from the axis, not for the film's neck and

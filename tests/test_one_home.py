@@ -52,19 +52,45 @@ def test_drives_tell_the_mesh_rule_how_deep_they_end():
         assert 2 * math.pi / 3 * depth**1.5 == pytest.approx(k * (0.5 - depth), rel=1e-10)
     assert lubjax.Spring(stiffness=1e9).final_depth(0.5) == pytest.approx(0.5, rel=1e-5)
     assert lubjax.Spring().final_depth(2.0) == pytest.approx(-1.0)  # the stage stops short
-    assert lubjax.FreeSphere().final_depth(0.5) is None
+    # a free sphere: Hertz's depth where its kinetic energy is stored, ½v̄0²/G = (4π/15) δ̄^{5/2},
+    # or where its weight balances Hertz's force, whichever is deeper
+    for g, v in ((1.0, -1.0), (0.05, -2.0)):
+        depth = lubjax.FreeSphere(g, v).final_depth(0.5)
+        assert 4 * math.pi / 15 * depth**2.5 == pytest.approx(0.5 * v**2 / g, rel=1e-12)
+    assert 2 * math.pi / 3 * lubjax.FreeSphere(1.0, 0.0, 0.3).final_depth(1.0) ** 1.5 == (
+        pytest.approx(0.3, rel=1e-12))
+    assert lubjax.FreeSphere(1.0, 0.5).final_depth(1.0) == 0.0  # receding, no weight
 
 
-def test_a_free_sphere_gets_no_contact_refinement_and_a_spring_its_balance_edge():
+def test_a_free_sphere_gets_its_rebound_contact_refined_and_a_spring_its_balance_edge():
     settings = lubjax.Settings()
     dr = settings.mesh_parameters()[0]
-    free = lubjax.mesh_for(settings, drive=lubjax.FreeSphere(), beta=1e3, z0=0.5, t_end=1e3)
-    assert np.min(np.diff(free.r)) == pytest.approx(dr, rel=0.05)
+    # ε = 1e-5, St = 20: the collision's film ~2.4e-3 needs the rebound contact ~4× finer
+    beta, st = 2 / (3 * math.pi**2 * 1e-5), 20.0
+    sphere = lubjax.FreeSphere(2 * beta / (math.pi * st))
+    free = lubjax.mesh_for(settings, drive=sphere, beta=beta, z0=1.0, t_end=12.0)
+    edge = math.sqrt(sphere.final_depth(1.0))
+    inside = free.r[free.r < edge]
+    assert np.max(np.diff(inside)) < dr / 3
+    assert np.min(np.diff(free.r)) > dr / settings.rim_refinement * (1 - 1e-9)
+    # near dry the film is held through the force: the tolerance's mesh, as before
+    dry = lubjax.mesh_for(settings, drive=sphere, beta=1e6, z0=1.0, t_end=12.0)
+    assert np.min(np.diff(dry.r)) == pytest.approx(dr, rel=0.05)
     spring = lubjax.mesh_for(settings, drive=lubjax.Spring(), beta=1e3, z0=0.5, t_end=1e3)
     finest = np.argmin(np.diff(spring.r))
     assert np.diff(spring.r)[finest] < 0.5 * dr
     edge = math.sqrt(lubjax.Spring().final_depth(0.5))
     assert spring.r[finest] == pytest.approx(edge, abs=0.05)
+
+
+def test_the_collision_film_scale_is_davis_serayssol_and_hinch():
+    """h̄ ≈ 0.24 z̄0 ε^{2/5}, ε = 2|v̄0|/(3π²β z̄0^{5/2}) (2/(3π²β) in the collision's scales)."""
+    beta = 2 / (3 * math.pi**2 * 1e-3)
+    assert lubjax.FreeSphere(1.0).collision_film(1.0, beta) == pytest.approx(0.24 * 1e-3**0.4)
+    # the same collision with d_c halved (β ∝ d_c^{3/2} t_c): z̄0 = 2, v̄0 = -2, h̄ twice
+    assert lubjax.FreeSphere(1.0, -2.0).collision_film(2.0, beta / 2**1.5) == (
+        pytest.approx(2 * 0.24 * 1e-3**0.4, rel=1e-12))
+    assert lubjax.FreeSphere(1.0, 0.0, 0.1).collision_film(1.0, beta) is None
 
 
 def test_mesh_for_checks_its_arguments():
