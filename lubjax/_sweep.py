@@ -28,7 +28,8 @@ from ._checks import check_parameter_arrays
 from ._controller import DONE
 from ._indenter import RampHold, SampledTravel
 from ._rollout import evaluate, rollout
-from ._solve import Settings, _check_x64, make_plan
+from ._settings import Settings
+from ._solve import _check_x64, make_plan
 from ._threads import single_threaded_blas
 
 
