@@ -31,15 +31,9 @@ from ._drives import FreeSphere, Load, Spring, Travel, as_drive, restitution  # 
 from ._indenter import RampHold, SampledTravel  # noqa: E402
 from ._layer import layer_thickness_bar  # noqa: E402
 from ._mesh import Mesh, graded_mesh, mesh_for, uniform_mesh  # noqa: E402
-from ._solve import (  # noqa: E402
-    Plan,
-    Result,
-    Settings,
-    SolverError,
-    force_curve,
-    make_plan,
-    relax,
-)
+from ._result import Result  # noqa: E402
+from ._settings import Settings  # noqa: E402
+from ._solve import Plan, SolverError, force_curve, make_plan, relax  # noqa: E402
 from ._substrate import HalfSpace, Layer, Viscoelastic  # noqa: E402
 from ._sweep import SweepResult, sweep  # noqa: E402
 from ._units import (  # noqa: E402

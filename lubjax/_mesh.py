@@ -6,8 +6,10 @@ L̄ = 4, see docs/model.md). We instead default to a *graded* mesh: uniform and 
 lives, then geometrically coarser out to a large L̄, so the truncation costs a few dozen nodes.
 
 The **mesh rule** (:func:`mesh_for`) is here too: the spacing, growth and length a tolerance
-gets (:func:`mesh_from_tolerance`), and how much a run refines the edge and the interior of the
-contact it ends in, for the thin film a long hold drains to.
+gets (:func:`mesh_from_tolerance`), the mesh of a ``Settings`` (:func:`mesh_parameters`,
+:func:`settings_mesh`: ``Settings`` holds the numbers, this module builds the mesh), and how
+much a run refines the edge and the interior of the contact it ends in, for the thin film a
+long hold drains to.
 """
 
 from __future__ import annotations
@@ -227,6 +229,44 @@ def mesh_from_tolerance(rtol: float) -> tuple[float, float, float]:
     return dr, growth, length
 
 
+def mesh_parameters(settings) -> tuple[float, float, float]:
+    """The mesh's numbers of ``settings`` (a :class:`lubjax.Settings`), each the setting where
+    given, else the one its rtol chooses (:func:`mesh_from_tolerance`).
+
+    Returns:
+        (Δr̄, growth, L̄): the fine zone's spacing and the domain length (units of √(R d_c))
+        and the cell-size ratio beyond ``r_fine``.
+    """
+    dr, growth, length = mesh_from_tolerance(settings.rtol)
+    return (
+        settings.dr if settings.dr is not None else dr,
+        settings.mesh_growth if settings.mesh_growth is not None else growth,
+        settings.length if settings.length is not None else length,
+    )
+
+
+def settings_mesh(settings, contact_radius: float | None = None,
+                  contact_refinement: float | None = None,
+                  rim_refinement: float | None = None,
+                  contact_slope: float | None = None) -> Mesh:
+    """The mesh of ``settings`` (:func:`mesh_parameters`), refined around a contact's edge
+    where one is given (:func:`graded_mesh`); ``Settings.mesh`` documents the arguments. With
+    none of them it is the mesh a batch shares (``make_plan``, ``sweep``, the fits)."""
+    dr, growth, length = mesh_parameters(settings)
+    rim = contact_radius
+    if rim is None and not isinstance(settings.contact_radius, str):
+        rim = settings.contact_radius
+    if rim is None:
+        return graded_mesh(dr, settings.r_fine, length, growth)
+    return graded_mesh(
+        dr, settings.r_fine, length, growth, rim=rim,
+        rim_dr=dr / (settings.rim_refinement if rim_refinement is None else rim_refinement),
+        contact_dr=dr / (settings.contact_refinement if contact_refinement is None
+                         else contact_refinement) if rim > 0 else None,
+        contact_slope=contact_slope if rim > 0 else None,
+    )
+
+
 #: Late in a hold the neck at the contact edge thins as h̄_min ≈ NECK_CONSTANT/√(β t̄)
 #: (measured: h̄_min √(β t̄) = 0.12-0.28 for β ∈ [10, 10⁴], z̄0 ∈ [0.05, 0.9], t̄ ∈ [10, 10³];
 #: the larger value is taken, so a neck is thought resolvable rather than not).
@@ -271,7 +311,7 @@ def _interior_refinement(settings, beta, t_end) -> float:
     """How much finer than Δr̄ the contact interior needs to be for the trapped film a run ends
     with: 1 (not at all) for a run that ends before the film under the contact is thin
     (the default t̄ ≤ 5 run), up to ``Settings.contact_refinement`` for long holds."""
-    dr = settings.mesh_parameters()[0]
+    dr = mesh_parameters(settings)[0]
     h_min = NECK_CONSTANT / math.sqrt(beta * t_end)
     needed = dr * math.sqrt(DIMPLE_ERROR / (DIMPLE_TARGET * settings.rtol * h_min))
     return min(settings.contact_refinement, max(1.0, needed))
@@ -290,7 +330,7 @@ def _rim_refinement(settings, beta, t_end) -> float:
     """How much finer than Δr̄ the contact's edge needs to be for the neck a run ends with:
     ~1 for the default t̄ ≤ 5 run (its neck, h̄_min ≈ 0.011 at β = 100, is 4 cells wide),
     up to ``Settings.rim_refinement`` for long holds at large β."""
-    dr = settings.mesh_parameters()[0]
+    dr = mesh_parameters(settings)[0]
     neck = (NECK_CONSTANT / math.sqrt(beta * t_end)) ** (2.0 / 3.0)
     cells = (NECK_ERROR / (DIMPLE_TARGET * settings.rtol)) ** (1.0 / NECK_ORDER)
     return min(settings.rim_refinement, max(1.0, dr * cells / neck))
@@ -303,7 +343,7 @@ def _contact_edge(settings, drive, z0) -> float | None:
     must be widened instead); None for ``contact_radius=None``."""
     if settings.contact_radius != "auto":
         return settings.contact_radius
-    dr = settings.mesh_parameters()[0]
+    dr = mesh_parameters(settings)[0]
     rim = final_contact_radius(drive, float(z0), dr)
     return None if rim is None or rim >= 0.95 * settings.r_fine else rim
 
@@ -314,7 +354,7 @@ def _contact_refinement(settings, drive, z0, beta, t_end) -> float | None:
     if settings.contact_radius != "auto":
         return None
     rim = _contact_edge(settings, drive, z0)
-    dr = settings.mesh_parameters()[0]
+    dr = mesh_parameters(settings)[0]
     if rim is None or not _neck_resolvable(float(beta), t_end, dr / settings.rim_refinement):
         return None
     return rim
@@ -415,10 +455,10 @@ def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
         # refined for the force of a contact growing from the axis, not for the film's neck and
         # dimple: the axis to Δr̄/contact_refinement, the spacing then growing with r̄ (a contact
         # of radius a keeps ~a/(2Δr̄) cells across it), the edge only for the Hertz force.
-        dr = settings.mesh_parameters()[0]
-        return settings.mesh(rim, settings.contact_refinement,
+        dr = mesh_parameters(settings)[0]
+        return settings_mesh(settings, rim, settings.contact_refinement,
                              min(DRY_RIM_REFINEMENT, settings.rim_refinement),
                              contact_slope=DRY_CONTACT_SLOPE * dr)
-    return settings.mesh(_contact_refinement(settings, drive, z0, beta, t_end),
+    return settings_mesh(settings, _contact_refinement(settings, drive, z0, beta, t_end),
                          _interior_refinement(settings, beta, t_end),
                          _rim_refinement(settings, beta, t_end))

@@ -29,7 +29,8 @@ from ._controller import DONE
 from ._indenter import RampHold, SampledTravel
 from ._output import evaluate
 from ._rollout import rollout
-from ._solve import Settings, _check_x64, make_plan
+from ._settings import Settings
+from ._solve import _check_x64, make_plan
 from ._threads import single_threaded_blas
 
 

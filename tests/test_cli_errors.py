@@ -24,6 +24,7 @@ import pytest
 
 import lubjax
 import lubjax._cli as lcli
+import lubjax._cli_output as lout
 import lubjax._solve as lsolve
 from fitting import _cli as fcli
 from fitting._fit import FitResult, Start
@@ -249,7 +250,7 @@ def test_relax_failed_write_after_run_is_exit_1_and_atomic(tmp_path, capsys, mon
         fh.write('{"t": [0.0, 0.1')
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(lcli.json, "dump", dump_then_fail)
+    monkeypatch.setattr(lout.json, "dump", dump_then_fail)
     assert lcli.main(DIM + ["--out", str(old)]) == 1
     line = _one_line_error(capsys.readouterr().err, "lubjax")
     assert f"cannot write {old}: No space left on device" in line

@@ -5,6 +5,7 @@ import pytest
 
 import lubjax
 import lubjax._cli as lcli
+import lubjax._cli_scenes as lscenes
 from fitting import _cli as fcli
 from fitting._model import FIT_SETTINGS
 from lubjax._cli_options import layer_poisson
@@ -67,6 +68,6 @@ def test_layer_options_without_a_layer_are_refused_by_both(argv, capsys):
 def test_the_drives_take_the_accuracy_options(command):
     args = lcli._parser().parse_args([command, "--rtol", "1e-5", "--order", "3",
                                       "--max-steps", "500"])
-    settings = lcli._settings(args)
+    settings = lscenes.settings_of(args)
     assert (settings.rtol, settings.order, settings.max_steps) == (1e-5, 3, 500)
-    assert lcli._settings(lcli._parser().parse_args([command])) == lubjax.Settings()
+    assert lscenes.settings_of(lcli._parser().parse_args([command])) == lubjax.Settings()

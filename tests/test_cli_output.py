@@ -16,6 +16,7 @@ import pytest
 
 import fitting._compare as fcompare
 import lubjax._cli as lcli
+import lubjax._cli_output as lout
 import lubjax._plotting as lplot
 import lubjax._solve as lsolve
 from fitting import _cli as fcli
@@ -287,13 +288,13 @@ def _relax_result(t_end=5.0, n=41):
 
 def test_relax_summary_in_si_units():
     res = _relax_result()
-    line = lcli.relax_summary(res, SI_TEST)
+    line = lout.relax_summary(res, SI_TEST)
     t_c, f_s = SI_TEST.time_scale, SI_TEST.force_scale
     assert f"peak {f_s:.5g} N at t = {t_c:.4g} s" in line
     assert f"force at t = {5 * t_c:.4g} s {res.force[-1] * f_s:.5g} N" in line
     assert f"thinnest film {1 / 6 * 140:.3g} um" in line
     assert "F(t_end)" not in line
-    assert "F(t_end)=" in lcli.relax_summary(res)  # dimensionless mode stays dimensionless
+    assert "F(t_end)=" in lout.relax_summary(res)  # dimensionless mode stays dimensionless
 
 
 def _captured_figure(monkeypatch):
@@ -325,8 +326,8 @@ def test_relax_figure_in_si_units_names_drive_and_substrate(monkeypatch):
 
 
 def test_relax_progress_line_only_on_a_terminal(monkeypatch, capsys):
-    monkeypatch.setattr(lcli, "PROGRESS_AFTER_S", 0.0)
-    monkeypatch.setattr(lcli, "PROGRESS_EVERY_S", 0.01)
+    monkeypatch.setattr(lout, "PROGRESS_AFTER_S", 0.0)
+    monkeypatch.setattr(lout, "PROGRESS_EVERY_S", 0.01)
 
     def relax(*args, progress, **kwargs):  # tells its phases as the solver's relax does
         for phase in ("compiling the solver", "running the solver"):
@@ -372,7 +373,7 @@ def test_bounce_summary_names_what_can_go_below_zero():
     gap = np.cos(t / 3)  # dips to -1: the rigid-body position under the undeformed surface
     res = SimpleNamespace(t=t, gap=gap, film_min=0.03 + 0.01 * (t - 8) ** 2 / 64,
                           force=np.exp(-((t - 9) ** 2)), accepted=200, run_s=0.1, compile_s=1.0)
-    line = lcli.bounce_summary(res, test, 0.4)
+    line = lout.bounce_summary(res, test, 0.4)
     assert "closest gap" not in line
     assert "minimum film thickness 1.5 um at t = 0.008 s" in line
     assert "lowest sphere position (rigid body) z = -50 um" in line

@@ -51,7 +51,7 @@ def _rigid_creep_gap(beta, load, t):
 def test_creep_of_a_rigid_film_follows_reynolds_and_converges():
     """A light load on a stiff substrate (F̄0 = 1e-5: the elastic deflection is ~F̄0/z̄^{3/2})
     against the closed form; the gap's error falls with rtol at the stepper's observed global
-    order in rtol, 1/2 to 2/3 (lubjax._solve.TIME_ORDER: each segment starts with backward
+    order in rtol, 1/2 to 2/3 (lubjax._estimate.TIME_ORDER: each segment starts with backward
     Euler, here at t̄ = 0 and where the load stops rising).
 
     Measured: 1.46e-3, 4.7e-4, 1.2e-4 at rtol 1e-3, 1e-4, 1e-5 (123, 145, 193 steps), nearly all
