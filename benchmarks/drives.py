@@ -95,7 +95,8 @@ def collision_film(beta, stokes, settings, refinement=None):
     mesh = None
     if refinement is not None:
         rim = np.sqrt(drive.final_depth(1.0))
-        mesh = lubjax.Settings().mesh(rim, refinement, refinement)
+        # (a contact beyond the default fine zone gets a wider one)
+        mesh = lubjax.Settings(r_fine=max(1.6, 1.25 * rim)).mesh(rim, refinement, refinement)
     res = lubjax.relax(beta, 1.0, 12.0, drive=drive, settings=settings, check="flag", mesh=mesh)
     i = int(np.argmin(res.film_min))
     estimate = res.film_min_error[i] if res.film_min_error is not None else np.nan

@@ -238,7 +238,7 @@ class Controller(NamedTuple):
         lands it on a velocity jump, :func:`choose_order` picks its formula."""
         t_new, lands = propose_end(t, state.dt_next, self.drive.breakpoints_array(),
                                    self.t_end)
-        previous = jax.tree_util.tree_map(lambda x: x[0], history)
+        previous = history.newest()
         order = choose_order(state, previous.force, state.peaks, self.tol.order, history,
                              t_new - t)
         return Attempt(t_new, lands, order)
@@ -250,7 +250,7 @@ class Controller(NamedTuple):
         positivity (:func:`admissible`), the PI decision (:func:`decide`) and, if kept, the
         peaks (:func:`update_peaks`)."""
         level = candidate.level
-        previous = jax.tree_util.tree_map(lambda x: x[0], history)
+        previous = history.newest()
         gap_start = self.gap_start(level.gap.dtype)
         film = film_scale(level, previous, self.tol.film_error, self.beta)
         ratio = error_ratio(candidate.estimate, level, previous, state.peaks, self.tol,

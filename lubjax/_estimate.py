@@ -16,18 +16,12 @@ SPACE_ORDER, TIME_ORDER = 1.5, 0.5
 #: Each estimate is the largest over this many accepted steps either side: the true error and
 #: its estimate change sign at different times, and a pointwise bound must cover both.
 ESTIMATE_WINDOW = 2
-#: The safety factor of Roache's grid convergence index (Roache, Verification and Validation in
-#: Computational Science and Engineering, 1998: 1.25 for three grids with a verified order, 3
-#: for two). Ours are two-level estimates at assumed orders, and the errors are not always in
-#: their asymptotic range: with the weighted far field (lubjax/_influence.py) the nested coarse
-#: mesh's error at β = 10, z̄0 = 2, t̄ = 0.26 was 1.5× the fine mesh's, not 2^{3/2}, and the
-#: time error at 8 rtol 2.2× that at rtol, not 8^{1/2}. With 1.25 the estimate then bounded the
-#: force's error at only 76-82 % of the output times for z̄0 = 2; 2 did at 100 % in all 20 cases
-#: of benchmarks/accuracy.py while the mobility's extrapolation error (lubjax/_stepper.py) made
-#: z̄0 = 2's time error large. With the mobility corrected that error fell 4-13× and what is
-#: left changes sign between the rtol and 8 rtol runs: with 2 the bound held at only 81-89 % of
-#: the times for z̄0 = 2 (β = 10-1000); with Roache's 3 it holds at 100 % in all 20 cases, at
-#: 4.3-8.5× the largest error.
+#: The safety factor of Roache's grid convergence index for two grids (Roache, Verification and
+#: Validation in Computational Science and Engineering, 1998). The estimates are two-level at
+#: assumed orders, and the errors are not always in their asymptotic range (the coarse mesh's
+#: error can be 1.5× the fine one's, not 2^{3/2}); with this factor the estimate bounds the
+#: force's error at every output time of the accuracy table's 20 cases, at 4.3-8.5× the largest
+#: error (docs/accuracy.md).
 SAFETY_FACTOR = 3.0
 
 

@@ -111,7 +111,7 @@ class Trajectory(NamedTuple):
 
 def series_of(disc, history: History, outflow, dissipation) -> Series:
     """The reported values of a history's newest level."""
-    level = jax.tree_util.tree_map(lambda x: x[0], history)
+    level = history.newest()
     elastic = elastic_part(disc, level.film, level.gap)  # Ŵū = -w̄
     return Series(
         force=level.force,

@@ -111,9 +111,9 @@ def make_plan(
         assert force.shape == (21,)
         ```
     """
-    history = _drive_of(history, drive)
+    drive = _drive_of(history, drive)
     settings = Settings() if settings is None else settings
-    t_start = float(history.t_start)
+    t_start = float(drive.t_start)
     t_end = check_t_end(t_end, t_start)
     if times is None:
         times = np.linspace(t_start, t_end, 501)
@@ -121,7 +121,7 @@ def make_plan(
     mesh = settings.mesh()
     substrate = as_substrate(substrate)
     return Plan(
-        discretise(mesh, substrate), settings.tolerance(), history, t_end, times, mesh, substrate
+        discretise(mesh, substrate), settings.tolerance(), drive, t_end, times, mesh, substrate
     )
 
 
@@ -182,7 +182,7 @@ def _lower_rollout(disc, drive, substrate, tol, n_profiles):
     )
 
 
-def _compiled_rollouts(runs, history, substrate) -> tuple[list, float]:
+def _compiled_rollouts(runs, drive, substrate) -> tuple[list, float]:
     """AOT-compile once per (mesh size, drive and substrate structure, tolerance structure,
     profile count): lets us report compile time apart. The tolerance's numbers are arguments,
     so the error estimate's run at 8·rtol reuses the program of the run at rtol. ``runs``:
@@ -191,11 +191,11 @@ def _compiled_rollouts(runs, history, substrate) -> tuple[list, float]:
     and the seconds spent (tracing, lowering and compiling)."""
 
     def key_of(disc, tol, ptimes):
-        leaves, treedef = jax.tree_util.tree_flatten((history, substrate, tol))
+        leaves, treedef = jax.tree_util.tree_flatten((drive, substrate, tol))
         return disc.r.shape[0], treedef, tuple(np.shape(x) for x in leaves), ptimes.size
 
     def lowerer(d, tol, pt):
-        return lambda: _lower_rollout(d, history, substrate, tol, pt.size)
+        return lambda: _lower_rollout(d, drive, substrate, tol, pt.size)
 
     return _compiler.cached_all(_COMPILED, [key_of(*r) for r in runs],
                                 [lowerer(*r) for r in runs])
@@ -274,19 +274,19 @@ def relax(
     """
     _check_x64()
     check_choice("check", check, ("raise", "warn", "flag"))
-    history = _drive_of(history, drive)
+    drive = _drive_of(history, drive)
     settings = Settings() if settings is None else settings
     substrate = as_substrate(substrate)
-    known = concrete((beta, z0, t_end, history, substrate))
+    known = concrete((beta, z0, t_end, drive, substrate))
     if known is None:
-        return _relax_traced(beta, z0, t_end, history, substrate, settings, profile_times, mesh)
-    beta_v, z0_v, t_end_v, history_v, substrate_v = known
+        return _relax_traced(beta, z0, t_end, drive, substrate, settings, profile_times, mesh)
+    beta_v, z0_v, t_end_v, drive_v, substrate_v = known
     check_parameters(beta_v, z0_v)
-    t_start = float(history_v.t_start)
+    t_start = float(drive_v.t_start)
     t_end_v = check_t_end(t_end_v, t_start)
     ptimes = check_times(profile_times, "profile_times", t_start, t_end_v)
     if mesh is None:
-        mesh = mesh_for(settings, drive=history_v, beta=beta_v, z0=z0_v, t_end=t_end_v)
+        mesh = mesh_for(settings, drive=drive_v, beta=beta_v, z0=z0_v, t_end=t_end_v)
     disc = discretise(mesh, substrate_v)
     tol = settings.tolerance()
     runs = [(disc, tol, ptimes)]
@@ -294,20 +294,20 @@ def relax(
         runs += estimate_runs(mesh, substrate_v, tol, ptimes)
     # With a derivative to take, the run itself goes through jit with its inputs' derivatives
     # attached; the error estimate's runs are not differentiated.
-    differentiated = any_traced((beta, z0, history, substrate))
+    differentiated = any_traced((beta, z0, drive, substrate))
     report = progress if progress is not None else (lambda phase: None)
     report("compiling the solver")
-    compiled, compile_s = _compiled_rollouts(runs[differentiated:], history_v, substrate_v)
+    compiled, compile_s = _compiled_rollouts(runs[differentiated:], drive_v, substrate_v)
     report("running the solver")
     start = time.perf_counter()
     with single_threaded_blas():
         trajs = [
             jax.block_until_ready(
-                fn(d, float(beta_v), float(z0_v), history_v, substrate_v, t_end_v, pt, t))
+                fn(d, float(beta_v), float(z0_v), drive_v, substrate_v, t_end_v, pt, t))
             for fn, (d, t, pt) in zip(compiled, runs[differentiated:])
         ]
         if differentiated:
-            trajs.insert(0, _differentiable_rollout(disc, beta, z0, history, substrate, t_end_v,
+            trajs.insert(0, _differentiable_rollout(disc, beta, z0, drive, substrate, t_end_v,
                                                     ptimes, tol))
     run_s = time.perf_counter() - start
     if settings.error_estimate:
@@ -336,7 +336,7 @@ def relax(
 _differentiable_rollout = jax.jit(_forward_rollout)
 
 
-def _relax_traced(beta, z0, t_end, history, substrate, settings, profile_times, mesh) -> Result:
+def _relax_traced(beta, z0, t_end, drive, substrate, settings, profile_times, mesh) -> Result:
     """:func:`relax` under ``jit`` or ``vmap``: one run on ``mesh`` (or the shared mesh), its
     entries as the loop left them, its flags traced."""
     times = np.atleast_1d(np.asarray(profile_times, np.float64))
@@ -344,6 +344,6 @@ def _relax_traced(beta, z0, t_end, history, substrate, settings, profile_times, 
         raise ValueError(f"profile_times must be a 1-D sequence of finite numbers, got {times}")
     mesh = settings.mesh() if mesh is None else mesh
     disc = discretise(mesh, substrate)
-    traj = _forward_rollout(disc, beta, z0, history, substrate, t_end, times,
+    traj = _forward_rollout(disc, beta, z0, drive, substrate, t_end, times,
                             settings.tolerance())
     return traced_result(traj, disc, beta, z0, t_end, times)

@@ -26,7 +26,7 @@ Departures from the paper, and why:
   pressure is algebraic in the film, so the O(Δt̄²) error of the extrapolated h̄* is an error
   of p̄ and F̄ at every step, smooth from step to step, which Milne's estimate cannot see:
   uncorrected, the force at β = 100, z̄0 = 2, rtol 1e-3 is 3.4e-3 of its peak off; corrected,
-  5.7e-4 on the same steps (benchmarks/time_error.py), and long holds need fewer steps
+  5.7e-4 on the same steps (benchmarks/studies/time_error.py), and long holds need fewer steps
   (β = 100, z̄0 = 0.5 to t̄ = 10⁶: 1783 instead of 3148). The cost is O(N²) per attempt
   against the O(N³) factorisation. The film volume still changes exactly by the reported
   outer flux (the two stages' fluxes; tests/test_analytic_limits.py).
@@ -77,8 +77,15 @@ class Level(NamedTuple):
     force: jax.Array  # F̄ⁿ
 
 
-#: History = Level with a leading levels axis on every field.
-History = Level
+class History(NamedTuple("Levels", [(name, jax.Array) for name in Level._fields])):
+    """The accepted levels a step reads, newest first: every field of :class:`Level` with a
+    leading axis of levels (:func:`history_depths` of them)."""
+
+    __slots__ = ()
+
+    def newest(self) -> Level:
+        """The newest level, n."""
+        return Level(*(x[0] for x in self))
 
 
 def history_depths(max_order: int) -> Level:
@@ -93,18 +100,14 @@ def history_depths(max_order: int) -> Level:
 
 def start_history(level: Level, max_order: int) -> History:
     """A history whose every level is ``level`` (a run at rest)."""
-    return jax.tree_util.tree_map(
-        lambda x, depth: jnp.broadcast_to(x, (depth, *jnp.shape(x))), level,
-        history_depths(max_order),
-    )
+    return History(*(jnp.broadcast_to(x, (depth, *jnp.shape(x)))
+                     for x, depth in zip(level, history_depths(max_order), strict=True)))
 
 
 def push(history: History, level: Level) -> History:
     """The history with ``level`` as its newest level (the oldest falls off)."""
-    return jax.tree_util.tree_map(
-        lambda stack, x: jnp.concatenate([x[None].astype(stack.dtype), stack[:-1]]),
-        history, level,
-    )
+    return History(*(jnp.concatenate([x[None].astype(stack.dtype), stack[:-1]])
+                     for stack, x in zip(history, level, strict=True)))
 
 
 class StepRecord(NamedTuple):
