@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._loop import Inputs, Record, block_size, initial_state
-from ._output import Profiles, Series, Step, Trajectory, save_profiles, series_of
+from ._output import Entry, Profiles, Series, Trajectory, save_profiles, series_of
 from ._stepper import push, step
 
 
@@ -190,7 +190,7 @@ def trajectory_tangent(traj: Trajectory, sensitivity: Sensitivity) -> Trajectory
         return jnp.where(where_, values[level], 0.0)
 
     s = sensitivity.series
-    step_dot = Step(
+    step_dot = Entry(
         t=jnp.zeros_like(steps.t),
         force=gather(s.force, kept), film_center=gather(s.film_center, kept),
         film_min=gather(s.film_min, kept), outflow=gather(s.outflow, new),

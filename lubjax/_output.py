@@ -31,7 +31,7 @@ class Output(NamedTuple):
     profiles: Profiles
 
 class Series(NamedTuple):
-    """The per-level values an output entry reports (the float fields of :class:`Step`)."""
+    """The per-level values an output entry reports (the float fields of :class:`Entry`)."""
 
     force: jax.Array
     film_center: jax.Array
@@ -43,7 +43,7 @@ class Series(NamedTuple):
     dissipation: jax.Array
 
 
-class Step(NamedTuple):
+class Entry(NamedTuple):
     """One output entry per attempt (entry 0: the initial state). A rejected attempt, or one after
     the run ended, repeats the last accepted level, so the entries are sorted in ``t``.
 
@@ -84,7 +84,7 @@ class Trajectory(NamedTuple):
     """What :func:`rollout` returns: the step entries, the profiles, and how the run ended.
 
     Attributes:
-        steps: the :class:`Step` entries, leading axis ``max_steps + 1``.
+        steps: the :class:`Entry` entries, leading axis ``max_steps + 1``.
         profiles: p̄ at the requested profile times, shape (P, N).
         profile_gaps: z̄ at the requested profile times, shape (P,).
         profile_films: h̄ at the requested profile times, shape (P, N).
@@ -94,7 +94,7 @@ class Trajectory(NamedTuple):
         t_final: the last accepted time t̄ (``t_end`` when it finished).
     """
 
-    steps: Step  # leading axis: max_steps + 1 entries
+    steps: Entry  # leading axis: max_steps + 1 entries
     profiles: jax.Array  # p̄ at the requested times, (P, N)
     profile_gaps: jax.Array  # z̄ at the requested times, (P,)
     profile_films: jax.Array  # h̄ at the requested times, (P, N)
@@ -125,10 +125,10 @@ def series_of(disc, history: History, outflow, dissipation) -> Series:
     )
 
 
-def entry_of(disc, state, outflow, dissipation, accepted, degree, stencil) -> Step:
+def entry_of(disc, state, outflow, dissipation, accepted, degree, stencil) -> Entry:
     """The output entry of a state's newest level."""
     series = series_of(disc, state.history, outflow, dissipation)
-    return Step(t=state.t, **series._asdict(), accepted=accepted, stencil=stencil,
+    return Entry(t=state.t, **series._asdict(), accepted=accepted, stencil=stencil,
                 degree=degree)
 
 
@@ -153,7 +153,7 @@ def save_profiles(profiles: Profiles, t, t_new, history: History, candidate,
         film=interpolant(level.film, history.film, profiles.film),
     )
 
-def blank_steps(first: Step, n: int, dtype) -> Step:
+def blank_steps(first: Entry, n: int, dtype) -> Entry:
     """Entries not yet written: t = +inf and NaN values, so a read past the end of an
     unfinished run gives NaN rather than a stale value."""
 
@@ -161,19 +161,19 @@ def blank_steps(first: Step, n: int, dtype) -> Step:
         fill = jnp.inf if a is first.t else (np.nan if a.dtype == dtype else 0)
         return jnp.full((n + 1, *a.shape), fill, a.dtype).at[0].set(a)
 
-    return Step(*(blank(a) for a in first))
+    return Entry(*(blank(a) for a in first))
 
 
-def evaluate(steps: Step, times, field: str = "force"):
+def evaluate(steps: Entry, times, field: str = "force"):
     """A field of the run at any times, by the stepper's own interpolant (of each step's order:
     cubic for BDF3 steps, quadratic for BDF2, linear for backward Euler).
 
     Differentiable and vmappable; the values do not depend on which other times are asked.
 
     Args:
-        steps: the run's :class:`Step` entries (``Trajectory.steps``).
+        steps: the run's :class:`Entry` entries (``Trajectory.steps``).
         times: t̄ (units of t_c); a scalar or an array.
-        field: a per-step series of :class:`Step`: "force" (default), "film_min",
+        field: a per-step series of :class:`Entry`: "force" (default), "film_min",
             "film_center", "outflow", "gap", "velocity", "elastic_energy" or "dissipation".
 
     Returns:
@@ -183,24 +183,24 @@ def evaluate(steps: Step, times, field: str = "force"):
     return _evaluate(jnp, steps, times, field)
 
 
-def evaluate_host(steps: Step, times, field: str = "force") -> np.ndarray:
+def evaluate_host(steps: Entry, times, field: str = "force") -> np.ndarray:
     """:func:`evaluate` in NumPy, for a finished run on the host: the same arithmetic without
     compiling anything (compiling even this small program costs ~0.2 s, for every new length
     of ``times``).
 
     Args:
-        steps: the run's :class:`Step` entries (``Trajectory.steps``; JAX or NumPy arrays).
+        steps: the run's :class:`Entry` entries (``Trajectory.steps``; JAX or NumPy arrays).
         times: t̄ (units of t_c); a scalar or an array.
-        field: a per-step series of :class:`Step`, as for :func:`evaluate` (default "force").
+        field: a per-step series of :class:`Entry`, as for :func:`evaluate` (default "force").
 
     Returns:
         numpy.ndarray: the field at ``times``, float64, shaped as ``times``.
     """
-    steps = Step(*(np.asarray(a) for a in steps))
+    steps = Entry(*(np.asarray(a) for a in steps))
     return _evaluate(np, steps, np.asarray(times, np.float64), field)
 
 
-def _evaluate(xp, steps: Step, times, field):
+def _evaluate(xp, steps: Entry, times, field):
     values = getattr(steps, field)
     times = xp.asarray(times, values.dtype)
     k = xp.clip(xp.searchsorted(steps.t, times, side="left"), 0, steps.t.shape[0] - 1)

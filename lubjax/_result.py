@@ -11,7 +11,7 @@ import numpy as np
 from ._checks import any_traced, check_times, concrete
 from ._controller import DONE, stop_reason
 from ._estimate import ESTIMATED, errors_of
-from ._output import Step, evaluate, evaluate_host
+from ._output import Entry, evaluate, evaluate_host
 from ._pytree import register
 
 #: The per-step series of a run, as the stepper's record names them.
@@ -66,7 +66,7 @@ class Result:
         rejected: the number of rejected step attempts.
         compile_s: wall time of compilation [s] (0 when cached).
         run_s: wall time of the run itself [s].
-        steps: the stepper's record of every accepted step (:class:`lubjax.stepper.Step`),
+        steps: the stepper's record of every accepted step (:class:`lubjax.stepper.Entry`),
             which :meth:`at` interpolates.
     """
 
@@ -99,7 +99,7 @@ class Result:
     rejected: int
     compile_s: float
     run_s: float
-    steps: Step = dataclasses.field(repr=False)
+    steps: Entry = dataclasses.field(repr=False)
 
     @property
     def ok(self) -> bool:

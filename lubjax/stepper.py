@@ -14,7 +14,7 @@ the tolerance of a :class:`lubjax.Settings`.
 
 Contents:
 
-* the loop: :func:`rollout`, its :class:`State`, one output entry per attempt :class:`Step`, the
+* the loop: :func:`rollout`, its :class:`State`, one output entry per attempt :class:`Entry`, the
   whole :class:`Trajectory`, :func:`evaluate` (a field at any times) and the controller's
   :class:`Tolerance`;
 * the discretisation: :class:`Discretisation`, :func:`discretise`, :func:`film_thickness`
@@ -29,14 +29,14 @@ from ._discretisation import Discretisation, discretise, displacement, film_thic
 from ._influence import force_weights, influence_matrix, kernel
 from ._layer import layer_influence_matrix
 from ._loop import State
-from ._output import Step, Trajectory, evaluate, evaluate_host
+from ._output import Entry, Trajectory, evaluate, evaluate_host
 from ._rollout import rollout
 
 __all__ = [
     "Discretisation",
+    "Entry",
     "State",
     "Status",
-    "Step",
     "Tolerance",
     "Trajectory",
     "discretise",
