@@ -25,7 +25,8 @@ import dataclasses
 import math
 
 from . import _model
-from ._fit import Start, fit_traces
+from ._fit import fit_traces
+from ._start import Start
 
 BIC_MARGIN = 10.0
 

@@ -65,7 +65,7 @@ from lubjax._fitting_api import compiler as _compiler
 from lubjax._fitting_api import motion_start
 from lubjax._fitting_api import sharding as _sharding
 
-from ._io import DRIVES, Trace, check_force_sign
+from ._trace import DRIVES, Trace, check_force_sign
 
 FIT_SETTINGS = lubjax.Settings(rtol=3e-4, force_floor=1e-5, max_steps=5000,
                                film_error="relative")

@@ -238,16 +238,16 @@ def test_mapped_and_vmapped_batches_fit_alike_and_map_skips_finished_traces():
         assert a.converged and b.converged
         for n in ("E_star", "viscosity", "z0"):
             assert abs(a.values[n] - b.values[n]) < 0.2 * a.stderr[n], n
-    from fitting import _fit, _model
+    from fitting import _model, _problem
 
     spec = fitting.ModelSpec()
     scales = [fitting.scales_from_trace(tr) for tr in traces]
-    data = _fit._stack_traces(traces, scales, spec, FIT_COARSE.mesh())
+    data = _problem.stack_traces(traces, scales, spec, FIT_COARSE.mesh())
     theta0 = np.array([[_model.to_theta(n, fits["map"][t].values[n], scales[t].response_unit)
                         for n in spec.names] for t in range(2)])
     groups = [[0], [1]]
-    layout, x0s = _fit._layout(groups, spec, ["a", "b"], theta0, ())
-    evaluate = _fit._Evaluator(data, fitting.make_solver(FIT_COARSE), spec, layout, groups,
+    layout, x0s = _problem.make_layout(groups, spec, ["a", "b"], theta0, ())
+    evaluate = _problem.Evaluator(data, fitting.make_solver(FIT_COARSE), spec, layout, groups,
                                batching="map")
     both, one = evaluate(x0s), evaluate(x0s, [1])
     assert one[0] is None and both[0][2] and one[1][2]
@@ -338,7 +338,7 @@ def _rough_problem(noise, cell=0.01):
     """A linear least-squares problem r = A x - b, σ = 0.1, whose residuals carry a roughness like
     an error-controlled model's: a pseudo-random offset of size ``noise`` per residual, constant
     on cells of width ``cell`` in x and jumping between them (the model's step choices change
-    with θ), with the smooth Jacobian A. Returns (_lm's evaluate, the smooth optimum, its
+    with θ), with the smooth Jacobian A. Returns (lm's evaluate, the smooth optimum, its
     standard errors)."""
     rng = np.random.default_rng(3)
     A = rng.normal(size=(200, 2))
@@ -363,13 +363,13 @@ def test_lm_ends_rough_costs_by_the_decrement():
     error) is convergence at the model's accuracy, large is reported as not converged. Over a
     scan of roughness levels, every such ending must have the verdict its distance to the smooth
     optimum calls for, and both verdicts must occur."""
-    from fitting import _fit
+    from fitting import _optimisers
 
     verdicts = set()
     for cell in (0.01, 0.003):
         for noise in np.linspace(0.004, 0.03, 14):
             evaluate, x_opt, se = _rough_problem(noise, cell)
-            (out,) = _fit._lm(evaluate, [np.array([3.0, 3.0])], [200], max_iter=300, tol=1e-4)
+            (out,) = _optimisers.lm(evaluate, [np.array([3.0, 3.0])], [200], max_iter=300, tol=1e-4)
             if "no decreasing step" not in out.message:
                 continue
             off = np.max(np.abs(out.x - x_opt) / se)

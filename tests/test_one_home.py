@@ -200,20 +200,22 @@ def test_public_surface():
 
 
 def test_fitting_uses_lubjax_through_its_public_surface():
-    """fitting imports lubjax.*, lubjax.stepper.* and lubjax._fitting_api only; the command
-    line's shared pieces (lubjax._cli_options, lubjax._files) are its other doors."""
-    allowed = {"_fitting_api", "_cli_options", "_files"}
+    """fitting imports lubjax.*, lubjax.stepper.* and its one declared door, lubjax._fitting_api;
+    no other private lubjax module, in any spelling of the import."""
+    allowed = {"_fitting_api"}
     used = set()
     for path in (ROOT / "fitting").glob("*.py"):
         text = path.read_text()
-        used |= set(re.findall(r"from lubjax\.(_\w+) import", text))
+        used |= set(re.findall(r"from lubjax\.(_\w+)", text))
         used |= set(re.findall(r"from lubjax import (_\w+)", text))
-    assert used and used <= allowed, used - allowed
+        used |= set(re.findall(r"import lubjax\.(_\w+)", text))
+        used |= set(re.findall(r"from \.\.(_\w+) import", text))
+    assert used == allowed, used - allowed
 
 
 def test_the_film_and_the_drives_are_written_once():
     """h̄ = z̄ + r̄²/2 + Ŵp̄ (eq 21) and its inverse live in lubjax/_discretisation.py
-    (film_thickness, elastic_part); the drives a fit knows in fitting/_io.py (DRIVES)."""
+    (film_thickness, elastic_part); the drives a fit knows in fitting/_trace.py (DRIVES)."""
     rigid = re.compile(r"0\.5 \* disc\.r\s*\*\*\s*2")
     written = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "lubjax").glob("*.py")
                      if rigid.search(p.read_text(encoding="utf-8")))
@@ -221,5 +223,5 @@ def test_the_film_and_the_drives_are_written_once():
     drives = re.compile(r"\(\s*\"travel\",\s*\"spring\",\s*\"force\"\s*\)")
     written = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "fitting").glob("*.py")
                      if drives.search(p.read_text(encoding="utf-8")))
-    assert written == ["fitting/_io.py"]
-    assert fitting._model.DRIVES is fitting._io.DRIVES
+    assert written == ["fitting/_trace.py"]
+    assert fitting._model.DRIVES is fitting._trace.DRIVES

@@ -88,7 +88,7 @@ for t, tr in enumerate(traces):
     peak = np.max(np.abs(tr.force))
     dy = np.max(np.abs(r_n[t] - r_1[t])) * sigma
     print(t, dy / peak, abs(film_n[t] / film_1[t] - 1))
-    # The model's global error is ~ rtol^(2/3) of the peak (fitting._fit._solver_error): two
+    # The model's global error is ~ rtol^(2/3) of the peak (fitting._problem.solver_error): two
     # equally valid runs that took different steps differ by up to that.
     assert dy < s.rtol ** (2 / 3) * peak and abs(film_n[t] / film_1[t] - 1) < s.rtol
 assert all(np.isfinite(r.values["E_star"]) for r in many + one)
