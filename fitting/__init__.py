@@ -26,18 +26,16 @@ from ._fit import FitResult, fit_trace, fit_traces
 from ._model import (
     FIT_SETTINGS,
     ModelSpec,
-    Scales,
     Solver,
     TraceData,
     make_solver,
-    noise_level,
     predict,
     residuals,
     residuals_and_jacobian,
-    scales_from_trace,
     trace_data,
 )
 from ._report import fit_report, result_to_dict, summary_line, write_table
+from ._scales import Scales, noise_level, scales_from_trace
 from ._start import Start, initial_guess
 from ._trace import Trace, make_trace
 

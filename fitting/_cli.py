@@ -32,10 +32,12 @@ from ._compare import compare_models
 from ._csv import parse_columns, parse_units, read_trace
 from ._figure import plot_fit
 from ._fit import fit_traces
-from ._model import DRIVES, FIT_SETTINGS, ModelSpec, scales_from_trace
+from ._model import FIT_SETTINGS, ModelSpec
 from ._optimisers import METHODS
 from ._report import fit_report, result_to_dict, summary_line, write_table
+from ._scales import drive_of, scales_from_trace
 from ._start import initial_guess
+from ._trace import DRIVES
 
 PROG = "lubjax-fit"
 SHAREABLE = ("E_star", "viscosity", "z0", "stiffening", "relaxation_time")
@@ -422,8 +424,6 @@ def _read_all(args, read_kw):
 
 
 def _common_drive(traces, drive):
-    from ._model import drive_of
-
     drives = {drive_of(t, drive) for t in traces}
     if len(drives) > 1:
         raise UsageError(f"the traces have different drives ({', '.join(sorted(drives))}): fit "

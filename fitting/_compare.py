@@ -24,7 +24,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from . import _model
+from . import _model, _scales
 from ._fit import fit_traces
 from ._start import Start
 
@@ -136,7 +136,7 @@ def compare_models(traces, *, simple=None, rich=None, tau_start=1.0, **fit_kwarg
         ```
     """
     if simple is None:
-        drive = _model.drive_of(traces[0], fit_kwargs.pop("drive", None))
+        drive = _scales.drive_of(traces[0], fit_kwargs.pop("drive", None))
         simple = _model.ModelSpec(drive=drive, fit_offset=fit_kwargs.pop("fit_offset", True),
                                   layer=fit_kwargs.pop("layer", None))
     rich = dataclasses.replace(simple, viscoelastic=True) if rich is None else rich

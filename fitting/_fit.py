@@ -21,10 +21,11 @@ import numpy as np
 import lubjax
 from lubjax._fitting_api import sharding as _sharding
 
-from . import _adequacy, _checks, _model, _stats
-from ._model import ModelSpec, Scales
+from . import _adequacy, _checks, _model, _scales, _stats
+from ._model import ModelSpec
 from ._optimisers import METHODS, OPTIMISERS
 from ._problem import Evaluator, fit_mesh, make_layout, solver_error, stack_traces
+from ._scales import Scales
 from ._start import Start, prepare_starts
 from ._trace import Trace
 
@@ -153,7 +154,7 @@ def _check_args(traces, method, max_iter, tol, starts):
 def _spec_for(traces, spec, drive, substrate_kw):
     if spec is not None:
         return spec
-    drives = {_model.drive_of(tr, drive) for tr in traces}
+    drives = {_scales.drive_of(tr, drive) for tr in traces}
     if len(drives) > 1:
         raise ValueError(
             f"traces fitted together must have one drive, got {', '.join(sorted(drives))}"
@@ -356,7 +357,7 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
         rms_residual=float(np.sqrt(np.mean((model - _channel(trace, spec)) ** 2))),
         autocorrelation_lag1_trace=float(_stats.lag1(r_t)),
         error_parts=parts,
-        noise_sigma=float(_model.noise_level(_channel(trace, spec))),
+        noise_sigma=float(_scales.noise_level(_channel(trace, spec))),
         condition=summary["condition"],
         max_correlation=summary["max_correlation"],
     )

@@ -19,7 +19,7 @@ import lubjax
 from lubjax._fitting_api import sharding as _sharding
 from lubjax._fitting_api import single_threaded_blas
 
-from . import _cache, _model
+from . import _cache, _model, _scales
 from ._model import ModelSpec
 
 
@@ -164,8 +164,8 @@ def fit_mesh(traces, starts, scales, spec, settings) -> lubjax.Mesh:
         E_star = start.values["E_star"]
         beta = lubjax.si_scales(E_star, sc.radius, sc.indent, t_c=sc.time_scale,
                                 viscosity=start.values["viscosity"])["beta"]
-        hist = _model.history(trace, sc, spec.drive)
-        drive = _model.make_drive(spec.drive, _model.drive_unit(trace, sc, spec.drive), hist,
+        hist = _scales.history(trace, sc, spec.drive)
+        drive = _model.make_drive(spec.drive, _scales.drive_unit(trace, sc, spec.drive), hist,
                                   E_star)
         try:
             meshes.append(lubjax.mesh_for(settings, drive=drive, beta=beta,
@@ -178,7 +178,7 @@ def fit_mesh(traces, starts, scales, spec, settings) -> lubjax.Mesh:
 
 def stack_traces(traces, scales, spec, mesh):
     n_pad = max(tr.time.size for tr in traces)
-    n_hist = max(_model.history_size(tr, s) for tr, s in zip(traces, scales, strict=True))
+    n_hist = max(_scales.history_size(tr, s) for tr, s in zip(traces, scales, strict=True))
     return _model.stack([_model.trace_data(tr, s, spec, mesh, n_pad, n_hist)
                          for tr, s in zip(traces, scales, strict=True)])
 

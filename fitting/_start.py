@@ -16,8 +16,9 @@ import numpy as np
 
 import lubjax
 
-from . import _model
-from ._model import ModelSpec, Scales
+from . import _scales
+from ._model import ModelSpec
+from ._scales import Scales
 from ._trace import Trace
 
 #: t½ ≈ RELAX_CONSTANT · t_c/β (see :func:`initial_guess`).
@@ -64,7 +65,7 @@ def _travel_guess(t, d, f, scales: Scales, notes: list) -> dict:
     quiet = t < scales.t_on
     offset = float(np.median(f[quiet])) if np.count_nonzero(quiet) >= 3 else 0.0
     fc = f - offset
-    sigma = _model.noise_level(f)
+    sigma = _scales.noise_level(f)
     smooth = np.convolve(fc, np.ones(5) / 5, mode="same")
     k_peak = int(np.argmax(smooth))
     f_peak = float(smooth[k_peak])
@@ -197,7 +198,7 @@ def initial_guess(trace: Trace, scales: Scales, spec: ModelSpec | None = None) -
         Start: a value per parameter of ``spec.names`` [SI] and notes on how
         each was found.
     """
-    spec = ModelSpec(drive=_model.drive_of(trace)) if spec is None else spec
+    spec = ModelSpec(drive=_scales.drive_of(trace)) if spec is None else spec
     notes: list[str] = []
     if spec.drive == "force":
         values = _creep_guess(trace.time, trace.force, trace.displacement, scales, notes)
@@ -258,7 +259,7 @@ def prepare_starts(traces, spec, shared, fixed, starts):
         allowed = ", ".join(n for n in spec.names if n != "offset")
         raise ValueError(f"shared: unknown parameter(s) {', '.join(unknown)} (allowed: {allowed})")
     fixed = check_fixed(fixed, spec, shared)
-    scales = [_model.scales_from_trace(tr, spec.drive) for tr in traces]
+    scales = [_scales.scales_from_trace(tr, spec.drive) for tr in traces]
     if starts is None:
         starts = [initial_guess(tr, s, spec) for tr, s in zip(traces, scales, strict=True)]
     if fixed:

@@ -28,7 +28,8 @@ import lubjax._solve as lsolve
 from fitting import _cli as fcli
 from fitting._csv import parse_trace, read_trace
 from fitting._fit import FitResult
-from fitting._model import ModelSpec, Scales
+from fitting._model import ModelSpec
+from fitting._scales import Scales
 from fitting._start import Start
 from fitting._trace import TraceError
 from lubjax import _files

@@ -20,9 +20,10 @@ import lubjax._plotting as lplot
 import lubjax._solve as lsolve
 from fitting import _cli as fcli
 from fitting._fit import FitResult
-from fitting._model import ModelSpec, Scales, to_theta
+from fitting._model import ModelSpec, to_theta
 from fitting._problem import make_layout
 from fitting._report import fit_report, short_value, summary_line
+from fitting._scales import Scales
 from fitting._start import Start
 from lubjax import RelaxationTest
 

@@ -114,7 +114,7 @@ def test_model_matches_an_independent_fine_solver():
 @pytest.mark.parametrize("stem", PAPER + ["spring_dc140", "creep_30mN"])
 def test_starting_values_from_physics_are_within_a_factor_two(stem):
     tr = read_data(stem)
-    spec = fitting.ModelSpec(drive=fitting._model.drive_of(tr))
+    spec = fitting.ModelSpec(drive=fitting._scales.drive_of(tr))
     st = fitting.initial_guess(tr, fitting.scales_from_trace(tr), spec)
     for name in ("E_star", "viscosity", "z0"):
         ratio = st.values[name] / float(tr.metadata[TRUE[name]])
@@ -124,11 +124,11 @@ def test_starting_values_from_physics_are_within_a_factor_two(stem):
 
 
 def test_drive_from_header_and_option():
-    assert fitting._model.drive_of(read_data("creep_30mN")) == "force"
-    assert fitting._model.drive_of(read_data("spring_dc140")) == "spring"
-    assert fitting._model.drive_of(read_data("paper_dc140")) == "travel"
+    assert fitting._scales.drive_of(read_data("creep_30mN")) == "force"
+    assert fitting._scales.drive_of(read_data("spring_dc140")) == "spring"
+    assert fitting._scales.drive_of(read_data("paper_dc140")) == "travel"
     with pytest.raises(ValueError, match="stiffness_N_m"):
-        fitting._model.drive_of(read_data("paper_dc140"), "spring")
+        fitting._scales.drive_of(read_data("paper_dc140"), "spring")
     sc = fitting.scales_from_trace(read_data("creep_30mN"))
     assert sc.input_end == pytest.approx(0.03, rel=1e-6)  # the load's plateau
     assert sc.time_scale == pytest.approx(1.0, rel=0.1)  # the ramp time

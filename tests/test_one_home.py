@@ -93,7 +93,7 @@ def test_si_scales_is_what_every_si_class_and_the_fit_use():
     by_time = lubjax.si_scales(test.E_star, test.radius, test.indent, t_c=test.time_scale,
                                viscosity=test.viscosity)
     assert by_time["beta"] == pytest.approx(sc["beta"], rel=1e-14)
-    scales = fitting._model.Scales(test.indent, test.speed, test.radius, 0.0, test.time_scale,
+    scales = fitting.Scales(test.indent, test.speed, test.radius, 0.0, test.time_scale,
                                    1.0, 1.0, test.indent)
     assert scales.beta(test.E_star, test.viscosity) == test.beta
     assert scales.force_scale(test.E_star) == test.force_scale
@@ -224,4 +224,4 @@ def test_the_film_and_the_drives_are_written_once():
     written = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "fitting").glob("*.py")
                      if drives.search(p.read_text(encoding="utf-8")))
     assert written == ["fitting/_trace.py"]
-    assert fitting._model.DRIVES is fitting._trace.DRIVES
+    assert fitting._scales.DRIVES is fitting._model.DRIVES is fitting._trace.DRIVES
