@@ -35,8 +35,8 @@ from ._fit import fit_traces
 from ._model import FIT_SETTINGS, ModelSpec
 from ._optimisers import METHODS
 from ._report import fit_report, result_to_dict, summary_line, write_table
-from ._scales import drive_of, scales_from_trace
-from ._start import initial_guess
+from ._scales import drive_of
+from ._start import scales_and_starts
 from ._trace import DRIVES
 
 PROG = "lubjax-fit"
@@ -258,14 +258,12 @@ def _fixed_option(args, spec: ModelSpec, shared) -> dict:
     return fixed
 
 
-def _start_warnings(traces, spec: ModelSpec, fixed: dict) -> list[str]:
+def _start_warnings(traces, scales, starts, fixed: dict) -> list[str]:
     """Implausible starting values (from the physics, before any fitting): a unit slip."""
     out = []
-    for tr in traces:
-        scales = scales_from_trace(tr, spec.drive)  # also refuses a force negative in compression
-        values = {n: v for n, v in initial_guess(tr, scales, spec).values.items()
-                  if n not in fixed}
-        for flag in plausibility_flags(values, scales.speed, e_star_range(tr.metadata)):
+    for tr, sc, start in zip(traces, scales, starts, strict=True):
+        values = {n: v for n, v in start.values.items() if n not in fixed}
+        for flag in plausibility_flags(values, sc.speed, e_star_range(tr.metadata)):
             out.append(f"{os.path.basename(tr.name)}: before fitting, from the data: {flag}")
     return out
 
@@ -300,7 +298,10 @@ def _run(args) -> int:
             _files.check_outputs(outputs, inputs=args.traces, input_label="input trace")
         spec = ModelSpec(drive=_common_drive(traces, args.drive), **spec_kw)
         fixed = _fixed_option(args, spec, shared)
-        for line in _start_warnings(traces, spec, fixed):
+        # the fit starts from these (scales_from_trace also refuses a force negative in
+        # compression, before any output is prepared)
+        scales, starts = scales_and_starts(traces, spec)
+        for line in _start_warnings(traces, scales, starts, fixed):
             sys.stderr.write(f"{PROG}: warning: {line}\n")
         _files.prepare_outputs(outputs)  # creates missing folders: only once the inputs are good
         cached = None
@@ -310,7 +311,7 @@ def _run(args) -> int:
             "compiling the solver, or loading it from the cache ..."
             if cached else "compiling the solver ..."))
         kw = dict(shared=shared, method=args.method, max_iter=args.max_iter, noise=args.noise,
-                  progress=progress)
+                  progress=progress, scales=scales, starts=starts)
         if fixed:
             kw["fixed"] = fixed
         if settings is not None:

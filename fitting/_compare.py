@@ -111,7 +111,8 @@ def compare_models(traces, *, simple=None, rich=None, tau_start=1.0, **fit_kwarg
         rich: the richer spec (default: ``simple`` with a viscoelastic solid).
         tau_start: the richer model's start for τ, in units of t_c; its other parameters start
             at the simple fit's optimum (E0/E∞ at 1.2).
-        **fit_kwargs: passed to :func:`fitting.fit_traces`.
+        **fit_kwargs: passed to :func:`fitting.fit_traces`; ``starts`` to the simple fit only
+            (the richer one starts from its optimum).
 
     Returns:
         tuple: (simple results, rich results, comparison dict), two lists of :class:`FitResult`, one
@@ -141,7 +142,8 @@ def compare_models(traces, *, simple=None, rich=None, tau_start=1.0, **fit_kwarg
                                   layer=fit_kwargs.pop("layer", None))
     rich = dataclasses.replace(simple, viscoelastic=True) if rich is None else rich
     progress = fit_kwargs.pop("progress", None)
-    base = fit_traces(traces, spec=simple, progress=_naming(progress, simple), **fit_kwargs)
+    base = fit_traces(traces, spec=simple, starts=fit_kwargs.pop("starts", None),
+                      progress=_naming(progress, simple), **fit_kwargs)
     starts = []
     for r in base:
         values = {n: r.values.get(n) for n in rich.names}

@@ -135,7 +135,7 @@ class FitResult(NamedTuple):
 # --------------------------------------------------------------------------- public API
 
 
-def _check_args(traces, method, max_iter, tol, starts):
+def _check_args(traces, method, max_iter, tol, starts, scales):
     if method not in METHODS:
         raise ValueError(
             f"method must be 'lm' (Levenberg-Marquardt), 'trf' (scipy least_squares) or "
@@ -147,8 +147,10 @@ def _check_args(traces, method, max_iter, tol, starts):
         raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
     if not (isinstance(tol, (int, float)) and tol > 0):
         raise ValueError(f"tol must be > 0, got {tol!r}")
-    if starts is not None and len(starts) != len(traces):
-        raise ValueError(f"starts must have one entry per trace ({len(traces)}), got {len(starts)}")
+    for name, given in (("starts", starts), ("scales", scales)):
+        if given is not None and len(given) != len(traces):
+            raise ValueError(f"{name} must have one entry per trace ({len(traces)}), got "
+                             f"{len(given)}")
 
 
 def _spec_for(traces, spec, drive, substrate_kw):
@@ -176,6 +178,7 @@ def fit_traces(
     max_iter: int = 60,
     tol: float = 1e-4,
     starts: list[Start] | None = None,
+    scales: list[Scales] | None = None,
     noise: str = "auto",
     model_error: bool = True,
     progress=None,
@@ -206,6 +209,8 @@ def fit_traces(
         max_iter: iteration limit (a positive integer).
         tol: convergence tolerance on the Gauss–Newton decrement/s² (> 0).
         starts: starting values per trace (default: :func:`initial_guess`).
+        scales: each trace's :class:`Scales` for the spec's drive, where the caller has them
+            already (default: ``scales_from_trace``).
         noise: "auto" (white unless the residuals are not), "white" or "ar1": the noise model
             of the covariance (:mod:`fitting._stats`).
         model_error: fold the solver's estimated error into the errors (:mod:`fitting._stats`).
@@ -240,7 +245,7 @@ def fit_traces(
         E_star, eta = res.values["E_star"], res.values["viscosity"]  # Pa, Pa s
         ```
     """
-    _check_args(traces, method, max_iter, tol, starts)
+    _check_args(traces, method, max_iter, tol, starts, scales)
     _sharding.batching_mode(batching)
     n_dev = _sharding.device_count(devices)
     spec = _spec_for(traces, spec, drive,
@@ -248,7 +253,7 @@ def fit_traces(
     shared = tuple(shared)
     if noise not in _stats.NOISE_MODELS:
         raise ValueError(f"noise must be one of {', '.join(_stats.NOISE_MODELS)}, got {noise!r}")
-    fixed, scales, starts = prepare_starts(traces, spec, shared, fixed, starts)
+    fixed, scales, starts = prepare_starts(traces, spec, shared, fixed, starts, scales)
     groups = [list(range(len(traces)))] if shared else [[t] for t in range(len(traces))]
     t0 = time.perf_counter()
     settings = _model.FIT_SETTINGS if settings is None else settings

@@ -250,18 +250,38 @@ def check_fixed(fixed, spec: ModelSpec, shared) -> dict:
     return out
 
 
-def prepare_starts(traces, spec, shared, fixed, starts):
-    """(fixed, scales, starts) of a fit, checked: the shared and fixed names, each trace's scales,
-    the starting values (:func:`initial_guess` where not given, fixed values put in), every one
-    positive where θ takes its logarithm."""
+def scales_and_starts(traces, spec: ModelSpec, scales=None, starts=None):
+    """Each trace's :class:`Scales` and :class:`Start`, computed where not given.
+
+    Args:
+        traces: the :class:`Trace` s.
+        spec: the :class:`ModelSpec` (its drive reads the scales, its names the starts).
+        scales: the traces' scales, or None: ``scales_from_trace`` for the spec's drive.
+        starts: their starting values, or None: :func:`initial_guess`.
+
+    Returns:
+        tuple: (scales, starts), two lists, one entry per trace.
+
+    Raises:
+        ValueError: a trace whose scales cannot be read (``scales_from_trace``).
+    """
+    if scales is None:
+        scales = [_scales.scales_from_trace(tr, spec.drive) for tr in traces]
+    if starts is None:
+        starts = [initial_guess(tr, s, spec) for tr, s in zip(traces, scales, strict=True)]
+    return list(scales), list(starts)
+
+
+def prepare_starts(traces, spec, shared, fixed, starts, scales=None):
+    """(fixed, scales, starts) of a fit, checked: the shared and fixed names, each trace's scales
+    and starting values (:func:`scales_and_starts` where not given, fixed values put in), every
+    one positive where θ takes its logarithm."""
     unknown = [n for n in shared if n not in spec.names or n == "offset"]
     if unknown:
         allowed = ", ".join(n for n in spec.names if n != "offset")
         raise ValueError(f"shared: unknown parameter(s) {', '.join(unknown)} (allowed: {allowed})")
     fixed = check_fixed(fixed, spec, shared)
-    scales = [_scales.scales_from_trace(tr, spec.drive) for tr in traces]
-    if starts is None:
-        starts = [initial_guess(tr, s, spec) for tr, s in zip(traces, scales, strict=True)]
+    scales, starts = scales_and_starts(traces, spec, scales, starts)
     if fixed:
         note = "held fixed: " + ", ".join(f"{n} = {v:g}" for n, v in fixed.items())
         starts = [Start({**st.values, **fixed}, (*st.notes, note)) for st in starts]

@@ -186,6 +186,28 @@ def _fake_fit_traces(traces, **kwargs):
     return [_fit_result(kwargs.get("spec"), name=tr.name) for tr in traces]
 
 
+def test_the_command_line_reads_scales_and_starts_once_and_the_fit_takes_them(monkeypatch):
+    """The start warnings' scales and starts are the fit's: computed once, passed along."""
+    import fitting._scales as fscales
+    import fitting._start as fstart
+
+    reads, calls = [], []
+    read = fscales.scales_from_trace
+    monkeypatch.setattr(fscales, "scales_from_trace",
+                        lambda tr, drive=None: reads.append(tr.name) or read(tr, drive))
+    monkeypatch.setattr(fcli, "fit_traces",
+                        lambda traces, **kw: calls.append(kw) or _fake_fit_traces(traces, **kw))
+    monkeypatch.setattr(fcli, "enable_compilation_cache", lambda: None)
+    assert fcli.main([SEED, "--quiet"]) == 0
+    assert reads == [SEED]
+    (kw,) = calls
+    assert isinstance(kw["scales"][0], Scales) and isinstance(kw["starts"][0], Start)
+    tr = fcli.read_trace(SEED)
+    _, scales, starts = fstart.prepare_starts([tr], kw["spec"], (), None, kw["starts"],
+                                              kw["scales"])
+    assert reads == [SEED] and scales == kw["scales"] and starts == kw["starts"]
+
+
 def test_fit_progress_in_a_log_has_no_control_characters_nor_a_cold_start_claim(
         monkeypatch, capsys):
     monkeypatch.setattr(fcli, "fit_traces", _fake_fit_traces)
