@@ -214,3 +214,20 @@ def drive_unit(trace: Trace, scales: Scales, drive: str) -> float:
                                            scales.radius, scales.indent)
     return 0.0
 
+
+
+def cut_trace(trace: Trace, t_bar: float) -> Trace:
+    """The trace up to t̄ = ``t_bar``: its samples before t_on + ``t_bar`` t_c (its own scales,
+    its drive from its header), a shorter record of the same test.
+
+    Args:
+        trace: the :class:`Trace`.
+        t_bar: where to cut, in units of the trace's t_c after its start t_on.
+
+    Returns:
+        Trace: the samples before the cut, with the trace's metadata and name.
+    """
+    sc = scales_from_trace(trace)
+    keep = trace.time < sc.t_on + t_bar * sc.time_scale
+    return trace._replace(time=trace.time[keep], displacement=trace.displacement[keep],
+                          force=trace.force[keep])
