@@ -28,8 +28,9 @@ from lubjax._fitting_api import files as _files
 from . import _afm
 from ._cache import enable_compilation_cache
 from ._checks import e_star_range, plausibility_flags
+from ._columns import parse_columns, parse_units
 from ._compare import compare_models
-from ._csv import parse_columns, parse_units, read_trace
+from ._csv import read_trace
 from ._figure import plot_fit
 from ._fit import fit_traces
 from ._model import FIT_SETTINGS, ModelSpec

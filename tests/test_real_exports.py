@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from fitting import _checks, parse_trace, read_trace, scales_from_trace
-from fitting._csv import parse_columns, parse_units
+from fitting._columns import parse_columns, parse_units
 from fitting._trace import TraceError, check_force_sign
 
 SEED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data",
