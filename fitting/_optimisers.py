@@ -5,7 +5,8 @@ r"""The optimisers of a fit (``method=``), each on every problem of the fit.
   |δ_i| ≤ 1 (a factor e per step in E*, η, z0). A step whose run makes the film negative or
   non-finite counts as rejected. The Jacobian comes with the residuals at about the cost of one
   run (the tangents reuse the step's factorisation), so every trial evaluates both: one model run
-  per iteration.
+  per iteration. As optimistix writes a solver: a state (:class:`LMState`), :func:`lm_init`,
+  :func:`lm_terminate` and :func:`lm_step`, composed by :func:`lm`.
 * ``"trf"``: ``scipy.optimize.least_squares`` (trust-region reflective) on the same residuals
   and Jacobian, one problem after another (benchmarks/fit_benchmark.py compares the two).
 * ``"lbfgs"``: ``optax.lbfgs`` on S with reverse-mode ``jax.grad`` (the stepper's checkpointed
@@ -26,6 +27,7 @@ converged, at the model's accuracy (the message says which and gives the decreme
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import NamedTuple
 
@@ -73,88 +75,131 @@ class Outcome(NamedTuple):
 # --------------------------------------------------------------------------- Levenberg–Marquardt
 
 
-def lm(evaluate: Evaluator, x0s, n_samples, *, max_iter, tol, progress=None):
-    """Levenberg–Marquardt for every problem at once (one model run per iteration)."""
+@dataclasses.dataclass
+class LMState:
+    """Levenberg–Marquardt's state, one entry per problem (:func:`lm_init`, :func:`lm_step`)."""
+
+    xs: list  # x of each problem
+    current: list  # (r, J, ok) at xs
+    cost: np.ndarray  # S = ½|r|² at xs (inf where the run failed)
+    lam: np.ndarray  # the damping λ
+    done: np.ndarray
+    converged: np.ndarray
+    iterations: np.ndarray  # the last iteration that proposed a step
+    stalled: np.ndarray  # successive trials that did not lower S by STALL_RTOL of it
+    messages: list
+    n_samples: list
+
+    def s2(self, k) -> float:
+        """Problem k's residual variance s² = 2S/(n - p)."""
+        return 2 * self.cost[k] / max(self.n_samples[k] - self.xs[k].size, 1)
+
+
+def lm_init(evaluate: Evaluator, x0s, n_samples) -> LMState:
+    """The state at the starts x0s (one model run); a problem whose run fails there is done."""
     K = len(x0s)
     xs = [x.copy() for x in x0s]
-    lam = np.full(K, 1e-3)
-    done = np.zeros(K, bool)
-    conv = np.zeros(K, bool)
-    iters = np.zeros(K, int)
-    stall = np.zeros(K, int)
-    msgs = [""] * K
     cur = evaluate(xs)
     cost = np.array([0.5 * float(rk @ rk) if ok else np.inf for rk, _, ok in cur])
+    state = LMState(xs, cur, cost, np.full(K, 1e-3), np.zeros(K, bool), np.zeros(K, bool),
+                    np.zeros(K, int), np.zeros(K, int), [""] * K, n_samples)
     for k, (_, _, ok) in enumerate(cur):
         if not ok:
-            done[k] = True
-            msgs[k] = ("the model run at the starting values failed (a negative film, NaN, or "
-                       "a run that stopped before the trace's end: the step budget ran out or "
-                       "the steps collapsed)")
+            state.done[k] = True
+            state.messages[k] = (
+                "the model run at the starting values failed (a negative film, NaN, or a run "
+                "that stopped before the trace's end: the step budget ran out or the steps "
+                "collapsed)")
+    return state
 
-    def s2_of(k):
-        return 2 * cost[k] / max(n_samples[k] - xs[k].size, 1)
 
-    for it in range(1, max_iter + 1):
-        trial = [x.copy() for x in xs]
-        for k in np.flatnonzero(~done):
-            r, J, _ = cur[k]
-            if decrement(r, J, s2_of(k)) < tol:
-                done[k], conv[k] = True, True
-                msgs[k] = "converged (Gauss-Newton decrement below tolerance)"
-                continue
-            A = J.T @ J
-            g = J.T @ r
-            M = A + lam[k] * np.diag(np.diag(A))
-            try:
-                delta = -np.linalg.solve(M, g)
-            except np.linalg.LinAlgError:
-                delta = -g / (np.diag(M) + 1e-300)
-            delta /= max(1.0, float(np.max(np.abs(delta))))
-            trial[k] = xs[k] + delta
-            iters[k] = it
-        if done.all():
-            break
-        new = evaluate(trial, np.flatnonzero(~done))
-        for k in np.flatnonzero(~done):
-            r_try, _, ok = new[k]
-            cost_try = 0.5 * float(r_try @ r_try) if ok else np.inf
-            accept = cost_try < cost[k]
-            small = (not accept) or (cost[k] - cost_try < STALL_RTOL * cost[k])
-            stall[k] = stall[k] + 1 if small else 0
-            if stall[k] >= 2:
-                dec = decrement(cur[k][0], cur[k][1], s2_of(k))
-                if dec < STALL_DECREMENT:
-                    done[k], conv[k] = True, True
-                    msgs[k] = (f"converged to the model's accuracy (cost stalled; Gauss-Newton "
-                               f"decrement {dec:.2g})")
-                    continue
-            if accept:
-                xs[k], cur[k], cost[k] = trial[k], new[k], cost_try
-                lam[k] = max(lam[k] / 3.0, 1e-9)
-            else:
-                lam[k] *= 4.0
-                if lam[k] > 1e12:
-                    done[k] = True
-                    dec = decrement(cur[k][0], cur[k][1], s2_of(k))
-                    if dec < NOISE_DECREMENT:
-                        conv[k] = True
-                        msgs[k] = (f"converged to the model's accuracy (no decreasing step; "
-                                   f"Gauss-Newton decrement {dec:.2g})")
-                    else:
-                        msgs[k] = (f"stopped: no decreasing step (lambda > 1e12) with the "
-                                   f"Gauss-Newton decrement at {dec:.2g}")
-        if progress is not None:
-            progress(it, cost, done)
-    out = []
-    for k in range(K):
+def lm_terminate(state: LMState, tol) -> LMState:
+    """Every problem not yet done whose Gauss–Newton decrement is below ``tol``: converged."""
+    for k in np.flatnonzero(~state.done):
+        r, J, _ = state.current[k]
+        if decrement(r, J, state.s2(k)) < tol:
+            state.done[k], state.converged[k] = True, True
+            state.messages[k] = "converged (Gauss-Newton decrement below tolerance)"
+    return state
+
+
+def lm_step(evaluate: Evaluator, state: LMState, it: int) -> LMState:
+    """Iteration ``it`` of every problem not done: a damped Gauss–Newton step, one model run
+    for all of them, each step accepted or rejected; a problem whose cost stalls, or that finds
+    no decreasing step, ends here (converged at the model's accuracy or stopped)."""
+    xs, cur, cost, lam, done = state.xs, state.current, state.cost, state.lam, state.done
+    trial = [x.copy() for x in xs]
+    for k in np.flatnonzero(~done):
         r, J, _ = cur[k]
-        if not done[k]:
-            msgs[k] = f"not converged after {max_iter} iterations"
-        if not conv[k] and np.isfinite(r).all() and decrement(r, J, s2_of(k)) < tol:
-            conv[k], msgs[k] = True, "converged (Gauss-Newton decrement below tolerance)"
-        out.append(Outcome(xs[k], r, J, int(iters[k]), bool(conv[k]), msgs[k]))
+        A = J.T @ J
+        g = J.T @ r
+        M = A + lam[k] * np.diag(np.diag(A))
+        try:
+            delta = -np.linalg.solve(M, g)
+        except np.linalg.LinAlgError:
+            delta = -g / (np.diag(M) + 1e-300)
+        delta /= max(1.0, float(np.max(np.abs(delta))))
+        trial[k] = xs[k] + delta
+        state.iterations[k] = it
+    new = evaluate(trial, np.flatnonzero(~done))
+    for k in np.flatnonzero(~done):
+        r_try, _, ok = new[k]
+        cost_try = 0.5 * float(r_try @ r_try) if ok else np.inf
+        accept = cost_try < cost[k]
+        small = (not accept) or (cost[k] - cost_try < STALL_RTOL * cost[k])
+        state.stalled[k] = state.stalled[k] + 1 if small else 0
+        if state.stalled[k] >= 2:
+            dec = decrement(cur[k][0], cur[k][1], state.s2(k))
+            if dec < STALL_DECREMENT:
+                done[k], state.converged[k] = True, True
+                state.messages[k] = (f"converged to the model's accuracy (cost stalled; "
+                                     f"Gauss-Newton decrement {dec:.2g})")
+                continue
+        if accept:
+            xs[k], cur[k], cost[k] = trial[k], new[k], cost_try
+            lam[k] = max(lam[k] / 3.0, 1e-9)
+        else:
+            lam[k] *= 4.0
+            if lam[k] > 1e12:
+                done[k] = True
+                dec = decrement(cur[k][0], cur[k][1], state.s2(k))
+                if dec < NOISE_DECREMENT:
+                    state.converged[k] = True
+                    state.messages[k] = (f"converged to the model's accuracy (no decreasing "
+                                         f"step; Gauss-Newton decrement {dec:.2g})")
+                else:
+                    state.messages[k] = (f"stopped: no decreasing step (lambda > 1e12) with "
+                                         f"the Gauss-Newton decrement at {dec:.2g}")
+    return state
+
+
+def lm_outcomes(state: LMState, tol, max_iter) -> list[Outcome]:
+    """Each problem's :class:`Outcome`; one still running after ``max_iter`` iterations is not
+    converged unless its decrement is below ``tol`` after all."""
+    out = []
+    for k in range(len(state.xs)):
+        r, J, _ = state.current[k]
+        conv, msg = bool(state.converged[k]), state.messages[k]
+        if not state.done[k]:
+            msg = f"not converged after {max_iter} iterations"
+        if not conv and np.isfinite(r).all() and decrement(r, J, state.s2(k)) < tol:
+            conv, msg = True, "converged (Gauss-Newton decrement below tolerance)"
+        out.append(Outcome(state.xs[k], r, J, int(state.iterations[k]), conv, msg))
     return out
+
+
+def lm(evaluate: Evaluator, x0s, n_samples, *, max_iter, tol, progress=None):
+    """Levenberg–Marquardt for every problem at once (one model run per iteration): init, then
+    terminate-or-step until every problem is done or ``max_iter`` is reached."""
+    state = lm_init(evaluate, x0s, n_samples)
+    for it in range(1, max_iter + 1):
+        state = lm_terminate(state, tol)
+        if state.done.all():
+            break
+        state = lm_step(evaluate, state, it)
+        if progress is not None:
+            progress(it, state.cost, state.done)
+    return lm_outcomes(state, tol, max_iter)
 
 
 # --------------------------------------------------------------------------- scipy, optax
