@@ -213,6 +213,35 @@ def test_fitting_uses_lubjax_through_its_public_surface():
     assert used == allowed, used - allowed
 
 
+def test_each_fitting_module_says_its_one_job_in_its_first_line_and_stays_short():
+    """fitting is split by job: every module opens with a one-line docstring saying what it is
+    for, and none grows past ~500 lines (a second job inside it)."""
+    for path in sorted((ROOT / "fitting").glob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        first = text.split("\n", 1)[0]
+        assert re.fullmatch(r'r?""".+[.?]("""|)', first), f"{path.name}: {first!r}"
+        assert text.count("\n") <= 500, f"{path.name}: {text.count(chr(10))} lines"
+
+
+#: fitting's modules from the bottom up: a reader following one fit goes down this list.
+FITTING_ORDER = ("_trace", "_columns", "_csv", "_afm", "_checks", "_stats", "_adequacy", "_cache",
+                 "_scales", "_model", "_start", "_problem", "_optimisers", "_fit", "_report",
+                 "_figure", "_compare", "_coverage", "_cli")
+
+
+def test_fitting_modules_import_only_the_ones_below_them():
+    """Each fitting module imports only modules below it in FITTING_ORDER: no cycle, and no
+    module that a reader of one fit must come back up to."""
+    on_disk = {p.stem for p in (ROOT / "fitting").glob("_*.py")} - {"__init__", "__main__"}
+    assert on_disk == set(FITTING_ORDER)
+    for k, name in enumerate(FITTING_ORDER):
+        text = (ROOT / "fitting" / f"{name}.py").read_text(encoding="utf-8")
+        used = set(re.findall(r"^\s*from \.(_\w+) import", text, re.M))
+        for names in re.findall(r"^\s*from \. import ([\w, ]+)", text, re.M):
+            used |= {n.strip().split(" as ")[0] for n in names.split(",")}
+        assert used <= set(FITTING_ORDER[:k]), f"{name} imports {used - set(FITTING_ORDER[:k])}"
+
+
 def test_the_film_and_the_drives_are_written_once():
     """h̄ = z̄ + r̄²/2 + Ŵp̄ (eq 21) and its inverse live in lubjax/_discretisation.py
     (film_thickness, elastic_part); the drives a fit knows in fitting/_trace.py (DRIVES)."""
