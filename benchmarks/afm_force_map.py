@@ -45,8 +45,8 @@ import numpy as np
 import fitting
 from benchmarks import _harness
 from fitting import _afm
-from fitting._io import TraceError
-from fitting._model import noise_level
+from fitting._scales import noise_level
+from fitting._trace import TraceError
 
 MAP = "afmformats-0.18.7/tests/data/fmt-jpk-fd_map2x2_extracted.jpk-force-map"
 RADIUS = 10e-6

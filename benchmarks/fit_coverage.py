@@ -31,6 +31,7 @@ from typing import NamedTuple
 import fitting
 from benchmarks import _harness
 from benchmarks._harness import ROOT
+from fitting._scales import cut_trace
 
 TRUE = {"E_star": "true_E_star_Pa", "viscosity": "true_viscosity_Pa_s", "z0": "true_z0_m",
         "stiffening": "true_stiffening", "relaxation_time": "true_relaxation_time_s"}
@@ -56,11 +57,8 @@ SCENES = {
 
 def clean_trace(stem="paper_dc154", t_bar=3.0):
     """The noiseless trace of ``stem`` cut to t̄ ≤ ``t_bar`` after its start."""
-    tr = fitting.read_trace(os.path.join(ROOT, "data", "clean", f"{stem}_clean.csv"))
-    sc = fitting.scales_from_trace(tr)
-    keep = tr.time < sc.t_on + t_bar * sc.time_scale
-    return tr._replace(time=tr.time[keep], displacement=tr.displacement[keep],
-                       force=tr.force[keep])
+    return cut_trace(fitting.read_trace(os.path.join(ROOT, "data", "clean", f"{stem}_clean.csv")),
+                     t_bar)
 
 
 def _markdown(rows):

@@ -52,7 +52,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
 import lubjax  # noqa: E402
-from fitting._io import make_trace, write_trace  # noqa: E402
+from fitting._csv import write_trace  # noqa: E402
+from fitting._trace import make_trace  # noqa: E402
 from lubjax._threads import single_threaded_blas  # noqa: E402
 
 RADIUS = 2.0e-3

@@ -18,26 +18,26 @@ Public API (see the module docstrings for the maths):
 import lubjax  # noqa: F401  (enables float64 in JAX)
 
 from ._afm import read_afm
-from ._cli import plot_fit, summary_line, write_table
 from ._compare import compare_models
 from ._coverage import coverage, noise_draws
-from ._fit import FitResult, Start, fit_trace, fit_traces, initial_guess
-from ._io import Trace, format_trace, make_trace, parse_trace, read_trace, write_trace
+from ._csv import format_trace, parse_trace, read_trace, write_trace
+from ._figure import plot_fit
+from ._fit import FitResult, fit_trace, fit_traces
 from ._model import (
     FIT_SETTINGS,
     ModelSpec,
-    Scales,
     Solver,
     TraceData,
     make_solver,
-    noise_level,
     predict,
     residuals,
     residuals_and_jacobian,
-    scales_from_trace,
     trace_data,
 )
-from ._report import fit_report, result_to_dict
+from ._report import fit_report, result_to_dict, summary_line, write_table
+from ._scales import Scales, noise_level, scales_from_trace
+from ._start import Start, initial_guess
+from ._trace import Trace, make_trace
 
 __all__ = [
     "FIT_SETTINGS",

@@ -51,15 +51,8 @@ import re
 
 import numpy as np
 
-from ._io import (
-    JPK_EXTENSIONS,
-    MAX_TRAVEL_OVER_RADIUS,
-    TraceError,
-    make_trace,
-    unzipped,
-    zip_export,
-    zip_head,
-)
+from ._csv import JPK_EXTENSIONS, unzipped, zip_export, zip_head
+from ._trace import MAX_TRAVEL_OVER_RADIUS, TraceError, make_trace
 
 #: File name endings read through afmformats (lower case).
 AFM_EXTENSIONS = (*JPK_EXTENSIONS, ".ibw", ".h5", ".tab")

@@ -1,5 +1,6 @@
-"""The fit's compiled programs across calls: a repeated ``lubjax-fit`` call loads the compiled
-solver from disk instead of compiling it again.
+"""The fit's compiled programs across calls: a repeated ``lubjax-fit`` loads them from disk.
+
+A warm call loads the compiled solver instead of compiling it again.
 
 JAX's persistent compilation cache is lubjax's (lubjax/_compile_cache.py: where it lives, how it
 is switched off; never on by importing the library): :func:`enable_compilation_cache` turns it

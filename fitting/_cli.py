@@ -13,54 +13,32 @@ be written (``--debug`` shows the traceback).
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import json
-import math
 import os
 import shutil
 import sys
 import textwrap
 import time
 
-import numpy as np
-
-from lubjax._cli_options import (
-    accuracy_settings,
-    add_accuracy_options,
-    add_cache_flag,
-    add_debug_flag,
-    add_substrate_options,
-    check_substrate_options,
-    example_lines,
-    layer_base,
-    layer_poisson,
-    positive_float,
-    positive_int,
-)
-from lubjax._files import (
-    EXIT_EPILOG,
-    EXIT_FAILED,
-    EXIT_OK,
-    Parser,
-    UsageError,
-    atomic_open,
-    check_distinct_inputs,
-    check_outputs,
-    plot_format,
-    prepare_outputs,
-    run_cli,
-    save_figure,
-)
+from lubjax._fitting_api import UsageError
+from lubjax._fitting_api import cli_options as _options
+from lubjax._fitting_api import files as _files
 
 from . import _afm
 from ._cache import enable_compilation_cache
 from ._checks import e_star_range, plausibility_flags
+from ._columns import parse_columns, parse_units
 from ._compare import compare_models
-from ._fit import METHODS, FitResult, fit_traces, initial_guess
-from ._io import parse_columns, parse_units, read_trace
-from ._model import DRIVES, FIT_SETTINGS, ModelSpec, scales_from_trace
-from ._report import fit_report, result_to_dict, short_value
+from ._csv import read_trace
+from ._figure import plot_fit
+from ._fit import fit_traces
+from ._model import FIT_SETTINGS, ModelSpec
+from ._optimisers import METHODS
+from ._report import fit_report, result_to_dict, summary_line, write_table
+from ._scales import drive_of
+from ._start import scales_and_starts
+from ._trace import DRIVES
 
 PROG = "lubjax-fit"
 SHAREABLE = ("E_star", "viscosity", "z0", "stiffening", "relaxation_time")
@@ -96,189 +74,11 @@ EXAMPLES = (
 
 def _epilog() -> str:
     """The exit statuses, the trace format, then runnable examples (the end of --help)."""
-    exits = EXIT_EPILOG.format(failed="a fit did not converge (its results are still "
-                               "written),\n     or an output could not be written")
-    examples = "\n".join(f"  {example_lines(line)}" for line in EXAMPLES)
+    exits = _files.EXIT_EPILOG.format(failed="a fit did not converge (its results are still "
+                                      "written),\n     or an output could not be written")
+    examples = "\n".join(f"  {_options.example_lines(line)}" for line in EXAMPLES)
     return (f"{exits}{TRACE_FORMAT}\n\nexamples (data/ of the lubjax sources holds these "
             f"traces):\n{examples}")
-
-
-def summary_line(res: FitResult) -> str:
-    """One line on a fit, as ``lubjax-fit`` prints it.
-
-    Args:
-        res: the :class:`FitResult`.
-
-    Returns:
-        The trace's name, the fitted values, β, z̄0, the rms residual, the reduced χ², whether
-        it converged, is identifiable and describes the data (``res.adequacy``), the
-        iterations and the wall time.
-    """
-    status = "converged" if res.converged else "NOT CONVERGED"
-    if not res.identifiable:
-        status += ", NOT IDENTIFIABLE"
-    if res.adequacy is not None and res.adequacy.ok is not None:
-        status += (", the model describes the data" if res.adequacy.ok
-                   else ", THE MODEL DOES NOT DESCRIBE THE DATA")
-    labels = {"E_star": "E*", "viscosity": "eta", "relaxation_time": "tau",
-              "stiffening": "E0/Einf"}
-    values = ", ".join(
-        f"{labels.get(n, n)} = {short_value(res, n)}" for n in res.spec.names if n != "offset"
-    )
-    unit = "N" if res.spec.response == "force" else "m"
-    return (
-        f"{os.path.basename(res.name) or 'trace'}: {values}; beta = {res.beta:.4g}, "
-        f"z0/dc = {res.z0_over_dc:.4g}, rms residual = {res.rms_residual:.3g} {unit}, "
-        f"reduced chi2 = {res.stats['reduced_chi2']:.3g}; "
-        f"{status} ({res.n_iterations} iterations, {res.wall_s:.1f} s)"
-    )
-
-
-#: Units a figure may read values in (the one where the peak reads between 1 and 1000).
-_FORCE_UNITS = (("N", 1.0), ("mN", 1e3), ("μN", 1e6), ("nN", 1e9))
-_LENGTH_UNITS = (("m", 1.0), ("mm", 1e3), ("μm", 1e6), ("nm", 1e9))
-
-
-def _unit(values, units) -> tuple[str, float]:
-    """(unit, factor) in which the largest |value| reads between 1 and 1000 (mN and μm for a
-    tribometer, nN for an AFM cantilever)."""
-    peak = float(np.max(np.abs(values))) if np.size(values) else 0.0
-    peak = peak if math.isfinite(peak) and peak > 0 else 1.0
-    return next(((u, s) for u, s in units if peak * s >= 1.0), units[-1])
-
-
-def _indentation(res: FitResult):
-    """An AFM or indenter vendor file's fit against indentation: (indentation of the data, of
-    the model, force of the data, of the model), the indentation being the tip's travel past
-    the fitted contact point z0; None for other traces (or a result without its input)."""
-    if "instrument_file" not in res.metadata or res.input is None:
-        return None
-    z0 = res.values["z0"]
-    if res.spec.drive == "force":  # load control: the response is the tip's own travel
-        return res.data - z0, res.model - z0, res.input, res.input
-    k = float(res.metadata["stiffness_N_m"])  # the tip: the stage less the bending F/k
-    return (res.input - res.data / k - z0, res.input - res.model / k - z0, res.data,
-            res.model)
-
-
-def fit_figure(res: FitResult):
-    """The figure of :func:`plot_fit` (a matplotlib Figure; close it when done)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    force = res.spec.response == "force"
-    unit, scale = _unit(res.data, _FORCE_UNITS if force else _LENGTH_UNITS)
-    label = "force" if force else "approach"
-    against = _indentation(res)
-    fig = plt.figure(figsize=(13, 8))
-    gs = fig.add_gridspec(3, 2, width_ratios=[1.55, 1], height_ratios=[3, 1.3, 1.2],
-                          hspace=0.55, wspace=0.08)
-    name = os.path.basename(res.name) or "trace"
-    if against is None:
-        ax = fig.add_subplot(gs[0, 0])
-        time_ax = ax
-    else:
-        # AFM users read force against indentation; the time view is kept beside it where a
-        # dwell (relaxation or creep at a held height or force) is fitted
-        dwell = "dwell" in res.metadata.get("segments", "")
-        top = gs[0, 0].subgridspec(1, 2, wspace=0.3) if dwell else None
-        ax = fig.add_subplot(top[0, 0] if dwell else gs[0, 0])
-        x_data, x_model, f_data, f_model = against
-        f_unit, f_scale = _unit(f_data, _FORCE_UNITS)
-        x_unit, x_scale = _unit(np.concatenate([x_data, x_model]), _LENGTH_UNITS)
-        ax.plot(x_data * x_scale, f_data * f_scale, ".", ms=2.0, color="0.6", label="data")
-        ax.plot(x_model * x_scale, f_model * f_scale, "-", color="C3", lw=1.4,
-                label="lubjax model (fit)")
-        ax.axvline(0.0, color="k", lw=0.8, ls=":", label="fitted contact point (z0)")
-        ax.set_xlabel(f"indentation: tip travel past contact [{x_unit}]")
-        ax.set_ylabel(f"force [{f_unit}]")
-        ax.legend(loc="upper left", fontsize=8)
-        ax.grid(alpha=0.3)
-        ax.set_title(name)
-        time_ax = fig.add_subplot(top[0, 1]) if dwell else None
-    if time_ax is not None:
-        time_ax.plot(res.time, res.data * scale, ".", ms=2.0, color="0.6", label="data")
-        time_ax.plot(res.time, res.model * scale, "-", color="C3", lw=1.4,
-                     label="lubjax model (fit)")
-        time_ax.set_ylabel(f"{label} [{unit}]")
-        if time_ax is not ax:
-            time_ax.set_xlabel("time [s]")
-        time_ax.set_title(name if time_ax is ax else "against time")
-        time_ax.legend(loc="best", fontsize=8 if against is not None else None)
-        time_ax.grid(alpha=0.3)
-    ax2 = fig.add_subplot(gs[1, 0], sharex=time_ax if time_ax is not None else None)
-    resid = (res.data - res.model) * scale
-    ax2.plot(res.time, resid, ".", ms=2.0, color="C0")
-    ax2.axhline(0.0, color="k", lw=0.8)
-    sigma = res.stats.get("noise_sigma", 0.0) * scale
-    for s in (-2 * sigma, 2 * sigma):
-        ax2.axhline(s, color="0.5", lw=0.6, ls="--")
-    ax2.set_ylabel(f"data - model [{unit}]")
-    ax2.set_xlabel("time [s]")
-    ax2.grid(alpha=0.3)
-    _adequacy_marks(ax2, res)
-    ax4 = fig.add_subplot(gs[2, 0])
-    r = resid - np.mean(resid)
-    lags = np.arange(1, min(60, r.size // 4))
-    acf = np.array([float(r[k:] @ r[: r.size - k]) for k in lags]) / max(float(r @ r), 1e-300)
-    ax4.bar(lags, acf, width=0.8, color="C0")
-    band = 2 / np.sqrt(r.size)
-    ax4.axhspan(-band, band, color="0.85", zorder=0, label="±2/√n (white noise)")
-    ax4.set_ylim(min(-3 * band, 1.1 * acf.min()), max(3 * band, 1.1 * acf.max()))
-    ax4.set_xlabel("lag [samples]")
-    ax4.set_ylabel("residual autocorr.")
-    ax4.legend(loc="upper right", fontsize=8)
-    ax4.grid(alpha=0.3)
-    ax3 = fig.add_subplot(gs[:, 1])
-    ax3.axis("off")
-    ax3.text(0.0, 1.0, fit_report(res), transform=ax3.transAxes, va="top", ha="left",
-             family="monospace", fontsize=6.8)
-    return fig
-
-
-def _adequacy_marks(ax, res: FitResult) -> None:
-    """The residual panel's title says whether the model describes the data; the segments
-    with systematic residuals are shaded."""
-    adequacy = res.adequacy
-    if adequacy is None or adequacy.ok is None:
-        return
-    t = res.time
-    bad = [seg for seg in adequacy.segments if seg.systematic]
-    for k, seg in enumerate(bad):
-        ax.axvspan(t[seg.start], t[seg.stop - 1], color="C3", alpha=0.12, lw=0,
-                   label="systematic residuals" if k == 0 else None)
-    chi2 = f"reduced chi2 {adequacy.reduced_chi2:.3g} against the noise in the residuals"
-    if adequacy.ok:
-        title, color = f"the model describes these data ({chi2})", "C2"
-    else:
-        where = (" over the " + ", the ".join(seg.name for seg in bad)) if bad else ""
-        title, color = (f"THE MODEL DOES NOT DESCRIBE THESE DATA: residuals systematic{where} "
-                        f"({chi2})"), "C3"
-    ax.set_title(textwrap.fill(title, 100), fontsize=8, color=color, loc="left")
-    if bad:
-        ax.legend(loc="best", fontsize=7)
-
-
-def plot_fit(res: FitResult, path: str) -> None:
-    """A figure of a fit: data and model, residuals (with their autocorrelation), and the fit
-    report. An AFM or indenter vendor file's fit is drawn against indentation (the tip's travel
-    past the fitted contact point), and against time too when it has a dwell.
-
-    Written atomically in the format of ``path``'s extension (png, pdf, svg, ...).
-
-    Args:
-        res: the :class:`FitResult`.
-        path: the file to write.
-    """
-    import matplotlib.pyplot as plt
-
-    fig = fit_figure(res)
-    try:
-        save_figure(fig, path, dpi=120, bbox_inches="tight")
-    finally:
-        plt.close(fig)
 
 
 def plot_paths(plot: str, traces) -> list[str]:
@@ -301,40 +101,8 @@ def plot_paths(plot: str, traces) -> list[str]:
     return [f"{stem}_{name}{ext}" for name in names]
 
 
-def write_table(results, path: str) -> None:
-    """A CSV table of fits, one row per trace: fitted values, errors, statistics and flags
-    (written atomically).
-
-    Args:
-        results: the :class:`FitResult` of each trace.
-        path: the file to write.
-    """
-    names = []
-    for r in results:
-        names += [n for n in r.spec.names if n not in names]
-    cols = ["trace", "drive", "substrate"]
-    for n in names:
-        cols += [n, f"{n}_se"]
-    cols += ["beta", "z0_over_dc", "rms_residual", "reduced_chi2", "noise_model", "converged",
-             "identifiable", "adequate", "adequacy_reduced_chi2", "n_iterations", "wall_s"]
-    with atomic_open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(cols)
-        for r in results:
-            row = [r.name, r.spec.drive, r.spec.substrate_label()]
-            for n in names:
-                row += [r.values.get(n, ""), r.stderr.get(n, "")]
-            adequacy = r.adequacy
-            row += [r.beta, r.z0_over_dc, r.rms_residual, r.stats["reduced_chi2"],
-                    r.stats["noise_model"], r.converged, r.identifiable,
-                    "" if adequacy is None or adequacy.ok is None else adequacy.ok,
-                    "" if adequacy is None else adequacy.reduced_chi2, r.n_iterations,
-                    r.wall_s]
-            w.writerow(row)
-
-
-def build_parser() -> Parser:
-    p = Parser(
+def build_parser() -> _files.Parser:
+    p = _files.Parser(
         prog=PROG,
         description="Fit the substrate modulus E*, film viscosity eta and initial gap z0 (and,\n"
         "for a viscoelastic solid, E0/Einf and tau) to tribometer traces with the lubjax\n"
@@ -350,7 +118,7 @@ def build_parser() -> Parser:
     )
     for add in (_add_trace_options, _add_model_options, _add_output_options, _add_fit_options):
         add(p)
-    add_debug_flag(p)
+    _options.add_debug_flag(p)
     return p
 
 
@@ -371,7 +139,7 @@ def _add_trace_options(p) -> None:
         "Optics11 Chiaro .txt, afmformats .h5/.tab; pip install lubjax[afm])",
         "the cantilever is the spring drive (k from the file), the height the stage; the "
         "retract is not fitted: adhesion and cavitation are not modelled")
-    afm.add_argument("--radius", type=positive_float,
+    afm.add_argument("--radius", type=_options.positive_float,
                      help="tip (sphere) radius R [m], over the file's (required where the file "
                      "gives none: JPK, Igor)")
     afm.add_argument("--poisson", type=float, help="Poisson ratio of the sample (for E from E*)")
@@ -385,7 +153,7 @@ def _add_trace_options(p) -> None:
                      "fit still fits an offset) or tilt (a line in the travel)")
     afm.add_argument("--curve", type=int, action="append",
                      help="curve index of a force map (repeatable; default: every curve)")
-    afm.add_argument("--max-samples", type=positive_int, default=_afm.MAX_SAMPLES,
+    afm.add_argument("--max-samples", type=_options.positive_int, default=_afm.MAX_SAMPLES,
                      help=f"decimate each curve to this many samples by block means (default "
                      f"{_afm.MAX_SAMPLES})")
 
@@ -403,7 +171,7 @@ def _add_model_options(p) -> None:
         "stiffness '# stiffness_N_m:'); default: the trace's '# drive:' header, else spring "
         "when it gives a stiffness, else travel",
     )
-    add_substrate_options(p.add_argument_group("substrate", textwrap.fill(
+    _options.add_substrate_options(p.add_argument_group("substrate", textwrap.fill(
         "A layer of known thickness on a rigid base, or a viscoelastic half-space: one Prony "
         "term, E0/Einf and tau fitted.", 76)))
     p.add_argument("--compare", action="store_true",
@@ -434,15 +202,16 @@ def _add_fit_options(p) -> None:
     p.add_argument("--noise", choices=("auto", "white", "ar1"), default="auto",
                    help="noise model of the errors: auto (AR(1) when the residuals are not "
                    "white; default), white, ar1")
-    p.add_argument("--max-iter", type=positive_int, default=60, help="iteration limit (default 60)")
-    add_accuracy_options(p, FIT_SETTINGS, max_steps=False)
-    add_cache_flag(p)
+    p.add_argument("--max-iter", type=_options.positive_int, default=60,
+                   help="iteration limit (default 60)")
+    _options.add_accuracy_options(p, FIT_SETTINGS, max_steps=False)
+    _options.add_cache_flag(p)
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
 
 
 def _spec_options(args, n_traces):
     """ModelSpec keyword arguments and shared names from the options (UsageError if bad)."""
-    check_substrate_options(args, layer_under_viscoelastic=False)
+    _options.check_substrate_options(args, layer_under_viscoelastic=False)
     if args.compare and args.substrate == "viscoelastic":
         raise UsageError("--compare fits the viscoelastic model itself: leave out --substrate "
                          "viscoelastic")
@@ -458,7 +227,8 @@ def _spec_options(args, n_traces):
         if any(x in ("stiffening", "relaxation_time") for x in shared) and (
                 args.substrate != "viscoelastic"):
             raise UsageError("--shared stiffening/relaxation_time need --substrate viscoelastic")
-    layer = (args.thickness, layer_poisson(args), layer_base(args)) if args.thickness else None
+    layer = ((args.thickness, _options.layer_poisson(args), _options.layer_base(args))
+             if args.thickness else None)
     return dict(layer=layer, viscoelastic=args.substrate == "viscoelastic",
                 fit_offset=not args.no_offset), shared
 
@@ -489,33 +259,31 @@ def _fixed_option(args, spec: ModelSpec, shared) -> dict:
     return fixed
 
 
-def _start_warnings(traces, spec: ModelSpec, fixed: dict) -> list[str]:
+def _start_warnings(traces, scales, starts, fixed: dict) -> list[str]:
     """Implausible starting values (from the physics, before any fitting): a unit slip."""
     out = []
-    for tr in traces:
-        scales = scales_from_trace(tr, spec.drive)  # also refuses a force negative in compression
-        values = {n: v for n, v in initial_guess(tr, scales, spec).values.items()
-                  if n not in fixed}
-        for flag in plausibility_flags(values, scales.speed, e_star_range(tr.metadata)):
+    for tr, sc, start in zip(traces, scales, starts, strict=True):
+        values = {n: v for n, v in start.values.items() if n not in fixed}
+        for flag in plausibility_flags(values, sc.speed, e_star_range(tr.metadata)):
             out.append(f"{os.path.basename(tr.name)}: before fitting, from the data: {flag}")
     return out
 
 
 def _run(args) -> int:
-    check_distinct_inputs(args.traces, "trace")
+    _files.check_distinct_inputs(args.traces, "trace")
     spec_kw, shared = _spec_options(args, len(args.traces))
     # Settings checks the range itself (a ValueError: one line, exit 2, before any fitting)
-    accuracy = accuracy_settings(args)
+    accuracy = _options.accuracy_settings(args)
     settings = dataclasses.replace(FIT_SETTINGS, **accuracy) if accuracy else None
     plots = []
     if args.plot is not None:
         if not args.plot.strip():
             raise UsageError("--plot: empty file name")
-        plot_format(args.plot)  # before the per-trace names, so the message shows the user's
+        _files.plot_format(args.plot)  # before the per-trace names, so the message shows the user's
         plots = plot_paths(args.plot, args.traces)
     outputs = [("--out", args.out), ("--table", args.table), ("--report", args.report)] + [
         ("--plot", p) for p in plots]
-    check_outputs(outputs, inputs=args.traces, input_label="input trace")
+    _files.check_outputs(outputs, inputs=args.traces, input_label="input trace")
     progress = _Progress(args.quiet)
     comparison = None
     read_kw = dict(force_sign=args.force_sign)
@@ -528,12 +296,15 @@ def _run(args) -> int:
         if plots and len(plots) != len(traces):  # a force map: one plot per curve
             plots = plot_paths(args.plot, [_curve_label(tr.name) for tr in traces])
             outputs = [o for o in outputs if o[0] != "--plot"] + [("--plot", p) for p in plots]
-            check_outputs(outputs, inputs=args.traces, input_label="input trace")
+            _files.check_outputs(outputs, inputs=args.traces, input_label="input trace")
         spec = ModelSpec(drive=_common_drive(traces, args.drive), **spec_kw)
         fixed = _fixed_option(args, spec, shared)
-        for line in _start_warnings(traces, spec, fixed):
+        # the fit starts from these (scales_from_trace also refuses a force negative in
+        # compression, before any output is prepared)
+        scales, starts = scales_and_starts(traces, spec)
+        for line in _start_warnings(traces, scales, starts, fixed):
             sys.stderr.write(f"{PROG}: warning: {line}\n")
-        prepare_outputs(outputs)  # creates missing folders: only once the inputs are good
+        _files.prepare_outputs(outputs)  # creates missing folders: only once the inputs are good
         cached = None
         if not args.no_cache:  # a repeated call loads the compiled solver instead of compiling
             cached = enable_compilation_cache()
@@ -541,7 +312,7 @@ def _run(args) -> int:
             "compiling the solver, or loading it from the cache ..."
             if cached else "compiling the solver ..."))
         kw = dict(shared=shared, method=args.method, max_iter=args.max_iter, noise=args.noise,
-                  progress=progress)
+                  progress=progress, scales=scales, starts=starts)
         if fixed:
             kw["fixed"] = fixed
         if settings is not None:
@@ -559,7 +330,7 @@ def _run(args) -> int:
     finally:
         progress.clear()  # an error message or the summary follows
     _write_results(args, results, other, comparison, plots)
-    return EXIT_OK if all(r.converged for r in results) else EXIT_FAILED
+    return _files.EXIT_OK if all(r.converged for r in results) else _files.EXIT_FAILED
 
 
 def _write_results(args, results, other, comparison, plots) -> None:
@@ -576,14 +347,14 @@ def _write_results(args, results, other, comparison, plots) -> None:
             d["alternative"] = {k: v for k, v in result_to_dict(o).items()
                                 if k not in ("comparison", "metadata")}
     if args.out:
-        with atomic_open(args.out, "w") as fh:
+        with _files.atomic_open(args.out, "w") as fh:
             json.dump(dicts[0] if len(dicts) == 1 else dicts, fh, indent=2)
         print(f"wrote {args.out}")
     if args.table:
         write_table(results, args.table)
         print(f"wrote {args.table}")
     if args.report:
-        with atomic_open(args.report, "w") as fh:
+        with _files.atomic_open(args.report, "w") as fh:
             fh.write("\n\n".join(fit_report(r) for r in results) + "\n")
         print(f"wrote {args.report}")
     for res, path in zip(results, plots):
@@ -655,8 +426,6 @@ def _read_all(args, read_kw):
 
 
 def _common_drive(traces, drive):
-    from ._model import drive_of
-
     drives = {drive_of(t, drive) for t in traces}
     if len(drives) > 1:
         raise UsageError(f"the traces have different drives ({', '.join(sorted(drives))}): fit "
@@ -666,7 +435,7 @@ def _common_drive(traces, drive):
 
 def main(argv=None) -> int:
     """Run ``lubjax-fit`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit status."""
-    return run_cli(PROG, build_parser(), _run, argv)
+    return _files.run_cli(PROG, build_parser(), _run, argv)
 
 
 if __name__ == "__main__":

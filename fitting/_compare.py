@@ -24,8 +24,9 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from . import _model
-from ._fit import Start, fit_traces
+from . import _model, _scales
+from ._fit import fit_traces
+from ._start import Start
 
 BIC_MARGIN = 10.0
 
@@ -110,7 +111,8 @@ def compare_models(traces, *, simple=None, rich=None, tau_start=1.0, **fit_kwarg
         rich: the richer spec (default: ``simple`` with a viscoelastic solid).
         tau_start: the richer model's start for τ, in units of t_c; its other parameters start
             at the simple fit's optimum (E0/E∞ at 1.2).
-        **fit_kwargs: passed to :func:`fitting.fit_traces`.
+        **fit_kwargs: passed to :func:`fitting.fit_traces`; ``starts`` to the simple fit only
+            (the richer one starts from its optimum).
 
     Returns:
         tuple: (simple results, rich results, comparison dict), two lists of :class:`FitResult`, one
@@ -135,12 +137,13 @@ def compare_models(traces, *, simple=None, rich=None, tau_start=1.0, **fit_kwarg
         ```
     """
     if simple is None:
-        drive = _model.drive_of(traces[0], fit_kwargs.pop("drive", None))
+        drive = _scales.drive_of(traces[0], fit_kwargs.pop("drive", None))
         simple = _model.ModelSpec(drive=drive, fit_offset=fit_kwargs.pop("fit_offset", True),
                                   layer=fit_kwargs.pop("layer", None))
     rich = dataclasses.replace(simple, viscoelastic=True) if rich is None else rich
     progress = fit_kwargs.pop("progress", None)
-    base = fit_traces(traces, spec=simple, progress=_naming(progress, simple), **fit_kwargs)
+    base = fit_traces(traces, spec=simple, starts=fit_kwargs.pop("starts", None),
+                      progress=_naming(progress, simple), **fit_kwargs)
     starts = []
     for r in base:
         values = {n: r.values.get(n) for n in rich.names}

@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from ._fit import fit_traces
-from ._model import FIT_SETTINGS, drive_of
+from ._model import FIT_SETTINGS
+from ._scales import drive_of
 
 
 def noise_draws(clean, n, rho=0.0, fraction=0.01, seed=2024):

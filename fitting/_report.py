@@ -1,7 +1,8 @@
-"""Fit reports: the JSON summary and a text report in the style of lmfit's ``fit_report``."""
+"""Reports of a fit: the JSON summary, the text report, the summary line and the CSV table."""
 
 from __future__ import annotations
 
+import csv
 import math
 import os
 import textwrap
@@ -9,6 +10,7 @@ import textwrap
 import numpy as np
 
 import lubjax
+from lubjax._fitting_api import files as _files
 
 from ._checks import e_star_range, plausibility_flags
 from ._fit import FitResult
@@ -279,3 +281,66 @@ def short_value(res: FitResult, n: str) -> str:
         return f"{v:.4g} {unit} (fixed)" if unit else f"{v:.4g} (fixed)"
     text = f"{v:.4g} ± {e:.2g}" if not math.isnan(e) else f"{v:.4g}"
     return f"{text} {unit}" if unit else text
+
+
+def summary_line(res: FitResult) -> str:
+    """One line on a fit, as ``lubjax-fit`` prints it.
+
+    Args:
+        res: the :class:`FitResult`.
+
+    Returns:
+        The trace's name, the fitted values, β, z̄0, the rms residual, the reduced χ², whether
+        it converged, is identifiable and describes the data (``res.adequacy``), the
+        iterations and the wall time.
+    """
+    status = "converged" if res.converged else "NOT CONVERGED"
+    if not res.identifiable:
+        status += ", NOT IDENTIFIABLE"
+    if res.adequacy is not None and res.adequacy.ok is not None:
+        status += (", the model describes the data" if res.adequacy.ok
+                   else ", THE MODEL DOES NOT DESCRIBE THE DATA")
+    labels = {"E_star": "E*", "viscosity": "eta", "relaxation_time": "tau",
+              "stiffening": "E0/Einf"}
+    values = ", ".join(
+        f"{labels.get(n, n)} = {short_value(res, n)}" for n in res.spec.names if n != "offset"
+    )
+    unit = "N" if res.spec.response == "force" else "m"
+    return (
+        f"{os.path.basename(res.name) or 'trace'}: {values}; beta = {res.beta:.4g}, "
+        f"z0/dc = {res.z0_over_dc:.4g}, rms residual = {res.rms_residual:.3g} {unit}, "
+        f"reduced chi2 = {res.stats['reduced_chi2']:.3g}; "
+        f"{status} ({res.n_iterations} iterations, {res.wall_s:.1f} s)"
+    )
+
+
+def write_table(results, path: str) -> None:
+    """A CSV table of fits, one row per trace: fitted values, errors, statistics and flags
+    (written atomically).
+
+    Args:
+        results: the :class:`FitResult` of each trace.
+        path: the file to write.
+    """
+    names = []
+    for r in results:
+        names += [n for n in r.spec.names if n not in names]
+    cols = ["trace", "drive", "substrate"]
+    for n in names:
+        cols += [n, f"{n}_se"]
+    cols += ["beta", "z0_over_dc", "rms_residual", "reduced_chi2", "noise_model", "converged",
+             "identifiable", "adequate", "adequacy_reduced_chi2", "n_iterations", "wall_s"]
+    with _files.atomic_open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(cols)
+        for r in results:
+            row = [r.name, r.spec.drive, r.spec.substrate_label()]
+            for n in names:
+                row += [r.values.get(n, ""), r.stderr.get(n, "")]
+            adequacy = r.adequacy
+            row += [r.beta, r.z0_over_dc, r.rms_residual, r.stats["reduced_chi2"],
+                    r.stats["noise_model"], r.converged, r.identifiable,
+                    "" if adequacy is None or adequacy.ok is None else adequacy.ok,
+                    "" if adequacy is None else adequacy.reduced_chi2, r.n_iterations,
+                    r.wall_s]
+            w.writerow(row)

@@ -17,6 +17,7 @@ import numpy as np
 
 import fitting
 import lubjax
+from fitting._scales import cut_trace
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DATA = os.path.join(ROOT, "data")
@@ -58,10 +59,7 @@ def read_data(stem, clean=False):
 
 def short_trace(stem, t_bar, clean=True):
     """The trace cut to t̄ ≤ ``t_bar`` after its start, with the scales of the cut trace."""
-    tr = read_data(stem, clean)
-    sc = fitting.scales_from_trace(tr)
-    keep = tr.time < sc.t_on + t_bar * sc.time_scale
-    tr = tr._replace(time=tr.time[keep], displacement=tr.displacement[keep], force=tr.force[keep])
+    tr = cut_trace(read_data(stem, clean), t_bar)
     return tr, fitting.scales_from_trace(tr)
 
 

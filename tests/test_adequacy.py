@@ -19,7 +19,7 @@ from scipy.stats import binom
 
 import fitting
 from fitting import _adequacy
-from fitting._cli import summary_line
+from fitting._report import summary_line
 
 from helpers import short_trace
 

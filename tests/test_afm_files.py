@@ -25,7 +25,7 @@ afmformats = pytest.importorskip("afmformats", reason="needs afmformats: pip ins
 import fitting  # noqa: E402
 from fitting import _afm  # noqa: E402
 from fitting._cli import main  # noqa: E402
-from fitting._io import MAX_TRAVEL_OVER_RADIUS, TraceError  # noqa: E402
+from fitting._trace import MAX_TRAVEL_OVER_RADIUS, TraceError  # noqa: E402
 
 from helpers import SDISTS, vendor_data  # noqa: E402
 

@@ -27,9 +27,12 @@ import lubjax._cli as lcli
 import lubjax._cli_output as lout
 import lubjax._solve as lsolve
 from fitting import _cli as fcli
-from fitting._fit import FitResult, Start
-from fitting._io import TraceError, parse_trace, read_trace
-from fitting._model import ModelSpec, Scales
+from fitting._csv import parse_trace, read_trace
+from fitting._fit import FitResult
+from fitting._model import ModelSpec
+from fitting._scales import Scales
+from fitting._start import Start
+from fitting._trace import TraceError
 from lubjax import _files
 from lubjax._checks import T_END_MAX
 
@@ -588,7 +591,7 @@ def test_fit_value_error_during_fit_is_exit_2(monkeypatch, capsys):
 
 def test_large_trace_is_read_by_numpy_not_line_by_line(tmp_path, monkeypatch):
     """Item 10: a good file never reaches the line-by-line parser (only a bad one does)."""
-    import fitting._io as io_mod
+    import fitting._csv as io_mod
 
     def slow(*args, **kwargs):
         raise AssertionError("good file parsed line by line")

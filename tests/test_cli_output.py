@@ -20,9 +20,12 @@ import lubjax._cli_output as lout
 import lubjax._plotting as lplot
 import lubjax._solve as lsolve
 from fitting import _cli as fcli
-from fitting._fit import FitResult, Start, _layout
-from fitting._model import ModelSpec, Scales, to_theta
-from fitting._report import fit_report, short_value
+from fitting._fit import FitResult
+from fitting._model import ModelSpec, to_theta
+from fitting._problem import make_layout
+from fitting._report import fit_report, short_value, summary_line
+from fitting._scales import Scales
+from fitting._start import Start
 from lubjax import RelaxationTest
 
 from helpers import DATA
@@ -123,7 +126,7 @@ def test_layer_comparison_starts_are_not_viscoelastic_and_progress_names_the_mod
 
 def test_units_are_not_repeated_and_offsets_get_no_relative_error():
     res = _fit_result(VISCO)
-    line = fcli.summary_line(res)
+    line = summary_line(res)
     assert line.count("E0/Einf") == 1 and "E0/Einf = 1.5 ± 0.022, tau" in line
     assert short_value(res, "stiffening") == "1.5 ± 0.022"
     assert short_value(res, "E_star") == "3.9 ± 0.05 MPa"
@@ -158,7 +161,7 @@ def test_joint_fit_reports_one_start_for_a_shared_parameter():
            dict(E_star=3.73e6, viscosity=100.7, z0=1.44e-4, offset=-4e-5)]
     theta0 = np.array([[to_theta(n, v[n], 1e-3) for n in spec.names] for v in own])
     shared = ("E_star", "viscosity")
-    layout, x0s = _layout([[0, 1]], spec, ["a", "b"], theta0, shared)
+    layout, x0s = make_layout([[0, 1]], spec, ["a", "b"], theta0, shared)
     scales = Scales(1.4e-4, 1e-4, 2e-3, 1.0, 1.4, 1.0, 1e-3, 1.4e-4)
     starts = [_start_used(Start(v, ("guess",)), spec, layout, t, x0s[0], scales, shared)
               for t, v in enumerate(own)]
@@ -182,6 +185,28 @@ def _fake_fit_traces(traces, **kwargs):
     for it in range(3):
         progress(f"iteration {it}, chi2/2 1, 0/1 done")
     return [_fit_result(kwargs.get("spec"), name=tr.name) for tr in traces]
+
+
+def test_the_command_line_reads_scales_and_starts_once_and_the_fit_takes_them(monkeypatch):
+    """The start warnings' scales and starts are the fit's: computed once, passed along."""
+    import fitting._scales as fscales
+    import fitting._start as fstart
+
+    reads, calls = [], []
+    read = fscales.scales_from_trace
+    monkeypatch.setattr(fscales, "scales_from_trace",
+                        lambda tr, drive=None: reads.append(tr.name) or read(tr, drive))
+    monkeypatch.setattr(fcli, "fit_traces",
+                        lambda traces, **kw: calls.append(kw) or _fake_fit_traces(traces, **kw))
+    monkeypatch.setattr(fcli, "enable_compilation_cache", lambda: None)
+    assert fcli.main([SEED, "--quiet"]) == 0
+    assert reads == [SEED]
+    (kw,) = calls
+    assert isinstance(kw["scales"][0], Scales) and isinstance(kw["starts"][0], Start)
+    tr = fcli.read_trace(SEED)
+    _, scales, starts = fstart.prepare_starts([tr], kw["spec"], (), None, kw["starts"],
+                                              kw["scales"])
+    assert reads == [SEED] and scales == kw["scales"] and starts == kw["starts"]
 
 
 def test_fit_progress_in_a_log_has_no_control_characters_nor_a_cold_start_claim(

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from fitting import _afm, _checks, _io
+from fitting import _afm, _checks, _csv, _trace
 from lubjax import _checks as solver_checks
 
 import helpers
@@ -55,16 +55,16 @@ QUOTES = [
     ("docs/guide/afm.md", r"flagged as implausible below (?P<x>[^(]+?) \(cells and tissue\), "
      r"not below the (?P<y>\S+ \S+) of\s+tribometer traces",
      (_checks.AFM_E_STAR_RANGE_PA[0], _checks.E_STAR_RANGE_PA[0])),
-    # what a trace file is refused for (fitting/_io.py)
+    # what a trace file is refused for (fitting/_trace.py, fitting/_csv.py)
     ("data/README.md", r"max \\\|`displacement_m`\\\| > (?P<x>[0-9.]+) R \|",
-     _io.MAX_TRAVEL_OVER_RADIUS),
-    ("data/README.md", r"max \\\|`force_N`\\\| > (?P<x>[0-9.]+ N) \|", _io.MAX_FORCE_N),
-    ("data/README.md", r"`radius_m` outside " + _RANGE + " m", _io.RADIUS_RANGE_M),
-    ("data/README.md", r"^- a file over (?P<x>[0-9.]+ GiB);", _io.MAX_FILE_BYTES),
-    ("data/README.md", r"fewer than (?P<x>[0-9]+) rows", _io.MIN_ROWS),
+     _trace.MAX_TRAVEL_OVER_RADIUS),
+    ("data/README.md", r"max \\\|`force_N`\\\| > (?P<x>[0-9.]+ N) \|", _trace.MAX_FORCE_N),
+    ("data/README.md", r"`radius_m` outside " + _RANGE + " m", _trace.RADIUS_RANGE_M),
+    ("data/README.md", r"^- a file over (?P<x>[0-9.]+ GiB);", _csv.MAX_FILE_BYTES),
+    ("data/README.md", r"fewer than (?P<x>[0-9]+) rows", _trace.MIN_ROWS),
     # AFM files (fitting/_afm.py)
     ("docs/guide/afm.md", r"it refuses more than (?P<x>[0-9.]+) R of\s+stage travel",
-     _io.MAX_TRAVEL_OVER_RADIUS),
+     _trace.MAX_TRAVEL_OVER_RADIUS),
     ("docs/guide/afm.md", r"the kept travel reaches (?P<x>[0-9.]+) of that", _afm.CAP),
     ("docs/guide/afm.md", r"`--max-samples` \(default (?P<x>[0-9]+)\)", _afm.MAX_SAMPLES),
     ("docs/guide/afm.md", r"within (?P<x>[0-9.]+) times the height sensor's white noise",

@@ -98,7 +98,7 @@ def _fit(metadata: dict, drive: str = "spring"):
 
 
 def _figure(res):
-    from fitting._cli import fit_figure
+    from fitting._figure import fit_figure
 
     return fit_figure(res)
 

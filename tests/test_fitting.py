@@ -114,7 +114,7 @@ def test_model_matches_an_independent_fine_solver():
 @pytest.mark.parametrize("stem", PAPER + ["spring_dc140", "creep_30mN"])
 def test_starting_values_from_physics_are_within_a_factor_two(stem):
     tr = read_data(stem)
-    spec = fitting.ModelSpec(drive=fitting._model.drive_of(tr))
+    spec = fitting.ModelSpec(drive=fitting._scales.drive_of(tr))
     st = fitting.initial_guess(tr, fitting.scales_from_trace(tr), spec)
     for name in ("E_star", "viscosity", "z0"):
         ratio = st.values[name] / float(tr.metadata[TRUE[name]])
@@ -124,11 +124,11 @@ def test_starting_values_from_physics_are_within_a_factor_two(stem):
 
 
 def test_drive_from_header_and_option():
-    assert fitting._model.drive_of(read_data("creep_30mN")) == "force"
-    assert fitting._model.drive_of(read_data("spring_dc140")) == "spring"
-    assert fitting._model.drive_of(read_data("paper_dc140")) == "travel"
+    assert fitting._scales.drive_of(read_data("creep_30mN")) == "force"
+    assert fitting._scales.drive_of(read_data("spring_dc140")) == "spring"
+    assert fitting._scales.drive_of(read_data("paper_dc140")) == "travel"
     with pytest.raises(ValueError, match="stiffness_N_m"):
-        fitting._model.drive_of(read_data("paper_dc140"), "spring")
+        fitting._scales.drive_of(read_data("paper_dc140"), "spring")
     sc = fitting.scales_from_trace(read_data("creep_30mN"))
     assert sc.input_end == pytest.approx(0.03, rel=1e-6)  # the load's plateau
     assert sc.time_scale == pytest.approx(1.0, rel=0.1)  # the ramp time
@@ -238,16 +238,16 @@ def test_mapped_and_vmapped_batches_fit_alike_and_map_skips_finished_traces():
         assert a.converged and b.converged
         for n in ("E_star", "viscosity", "z0"):
             assert abs(a.values[n] - b.values[n]) < 0.2 * a.stderr[n], n
-    from fitting import _fit, _model
+    from fitting import _model, _problem
 
     spec = fitting.ModelSpec()
     scales = [fitting.scales_from_trace(tr) for tr in traces]
-    data = _fit._stack_traces(traces, scales, spec, FIT_COARSE.mesh())
+    data = _problem.stack_traces(traces, scales, spec, FIT_COARSE.mesh())
     theta0 = np.array([[_model.to_theta(n, fits["map"][t].values[n], scales[t].response_unit)
                         for n in spec.names] for t in range(2)])
     groups = [[0], [1]]
-    layout, x0s = _fit._layout(groups, spec, ["a", "b"], theta0, ())
-    evaluate = _fit._Evaluator(data, fitting.make_solver(FIT_COARSE), spec, layout, groups,
+    layout, x0s = _problem.make_layout(groups, spec, ["a", "b"], theta0, ())
+    evaluate = _problem.Evaluator(data, fitting.make_solver(FIT_COARSE), spec, layout, groups,
                                batching="map")
     both, one = evaluate(x0s), evaluate(x0s, [1])
     assert one[0] is None and both[0][2] and one[1][2]
@@ -338,7 +338,7 @@ def _rough_problem(noise, cell=0.01):
     """A linear least-squares problem r = A x - b, σ = 0.1, whose residuals carry a roughness like
     an error-controlled model's: a pseudo-random offset of size ``noise`` per residual, constant
     on cells of width ``cell`` in x and jumping between them (the model's step choices change
-    with θ), with the smooth Jacobian A. Returns (_lm's evaluate, the smooth optimum, its
+    with θ), with the smooth Jacobian A. Returns (lm's evaluate, the smooth optimum, its
     standard errors)."""
     rng = np.random.default_rng(3)
     A = rng.normal(size=(200, 2))
@@ -363,13 +363,13 @@ def test_lm_ends_rough_costs_by_the_decrement():
     error) is convergence at the model's accuracy, large is reported as not converged. Over a
     scan of roughness levels, every such ending must have the verdict its distance to the smooth
     optimum calls for, and both verdicts must occur."""
-    from fitting import _fit
+    from fitting import _optimisers
 
     verdicts = set()
     for cell in (0.01, 0.003):
         for noise in np.linspace(0.004, 0.03, 14):
             evaluate, x_opt, se = _rough_problem(noise, cell)
-            (out,) = _fit._lm(evaluate, [np.array([3.0, 3.0])], [200], max_iter=300, tol=1e-4)
+            (out,) = _optimisers.lm(evaluate, [np.array([3.0, 3.0])], [200], max_iter=300, tol=1e-4)
             if "no decreasing step" not in out.message:
                 continue
             off = np.max(np.abs(out.x - x_opt) / se)

@@ -1,6 +1,6 @@
 """Fuzz the trace reader (issue 9): 400 seeded random mutations of data/paper_dc140.csv.
 
-Each mutated file must either load into a valid trace or raise ``fitting._io.TraceError`` (a
+Each mutated file must either load into a valid trace or raise ``fitting._trace.TraceError`` (a
 ValueError) whose one-line message starts with the file name and, where it names a line, names
 one that exists. Nothing else: no UnicodeDecodeError, IndexError, numpy error, ... And the
 numpy fast path of ``read_trace`` must agree with the line-by-line ``parse_trace``: the same
@@ -15,7 +15,8 @@ import re
 import numpy as np
 import pytest
 
-from fitting._io import MIN_ROWS, TraceError, parse_trace, read_trace
+from fitting._csv import parse_trace, read_trace
+from fitting._trace import MIN_ROWS, TraceError
 
 from helpers import SEED_TRACE as SEED_FILE
 

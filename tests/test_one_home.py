@@ -119,7 +119,7 @@ def test_si_scales_is_what_every_si_class_and_the_fit_use():
     by_time = lubjax.si_scales(test.E_star, test.radius, test.indent, t_c=test.time_scale,
                                viscosity=test.viscosity)
     assert by_time["beta"] == pytest.approx(sc["beta"], rel=1e-14)
-    scales = fitting._model.Scales(test.indent, test.speed, test.radius, 0.0, test.time_scale,
+    scales = fitting.Scales(test.indent, test.speed, test.radius, 0.0, test.time_scale,
                                    1.0, 1.0, test.indent)
     assert scales.beta(test.E_star, test.viscosity) == test.beta
     assert scales.force_scale(test.E_star) == test.force_scale
@@ -226,20 +226,51 @@ def test_public_surface():
 
 
 def test_fitting_uses_lubjax_through_its_public_surface():
-    """fitting imports lubjax.*, lubjax.stepper.* and lubjax._fitting_api only; the command
-    line's shared pieces (lubjax._cli_options, lubjax._files) are its other doors."""
-    allowed = {"_fitting_api", "_cli_options", "_files"}
+    """fitting imports lubjax.*, lubjax.stepper.* and its one declared door, lubjax._fitting_api;
+    no other private lubjax module, in any spelling of the import."""
+    allowed = {"_fitting_api"}
     used = set()
     for path in (ROOT / "fitting").glob("*.py"):
         text = path.read_text()
-        used |= set(re.findall(r"from lubjax\.(_\w+) import", text))
+        used |= set(re.findall(r"from lubjax\.(_\w+)", text))
         used |= set(re.findall(r"from lubjax import (_\w+)", text))
-    assert used and used <= allowed, used - allowed
+        used |= set(re.findall(r"import lubjax\.(_\w+)", text))
+        used |= set(re.findall(r"from \.\.(_\w+) import", text))
+    assert used == allowed, used - allowed
+
+
+def test_each_fitting_module_says_its_one_job_in_its_first_line_and_stays_short():
+    """fitting is split by job: every module opens with a one-line docstring saying what it is
+    for, and none grows past ~500 lines (a second job inside it)."""
+    for path in sorted((ROOT / "fitting").glob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        first = text.split("\n", 1)[0]
+        assert re.fullmatch(r'r?""".+[.?]("""|)', first), f"{path.name}: {first!r}"
+        assert text.count("\n") <= 500, f"{path.name}: {text.count(chr(10))} lines"
+
+
+#: fitting's modules from the bottom up: a reader following one fit goes down this list.
+FITTING_ORDER = ("_trace", "_columns", "_csv", "_afm", "_checks", "_stats", "_adequacy", "_cache",
+                 "_scales", "_model", "_start", "_problem", "_optimisers", "_fit", "_report",
+                 "_figure", "_compare", "_coverage", "_cli")
+
+
+def test_fitting_modules_import_only_the_ones_below_them():
+    """Each fitting module imports only modules below it in FITTING_ORDER: no cycle, and no
+    module that a reader of one fit must come back up to."""
+    on_disk = {p.stem for p in (ROOT / "fitting").glob("_*.py")} - {"__init__", "__main__"}
+    assert on_disk == set(FITTING_ORDER)
+    for k, name in enumerate(FITTING_ORDER):
+        text = (ROOT / "fitting" / f"{name}.py").read_text(encoding="utf-8")
+        used = set(re.findall(r"^\s*from \.(_\w+) import", text, re.M))
+        for names in re.findall(r"^\s*from \. import ([\w, ]+)", text, re.M):
+            used |= {n.strip().split(" as ")[0] for n in names.split(",")}
+        assert used <= set(FITTING_ORDER[:k]), f"{name} imports {used - set(FITTING_ORDER[:k])}"
 
 
 def test_the_film_and_the_drives_are_written_once():
     """h̄ = z̄ + r̄²/2 + Ŵp̄ (eq 21) and its inverse live in lubjax/_discretisation.py
-    (film_thickness, elastic_part); the drives a fit knows in fitting/_io.py (DRIVES)."""
+    (film_thickness, elastic_part); the drives a fit knows in fitting/_trace.py (DRIVES)."""
     rigid = re.compile(r"0\.5 \* disc\.r\s*\*\*\s*2")
     written = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "lubjax").glob("*.py")
                      if rigid.search(p.read_text(encoding="utf-8")))
@@ -247,5 +278,5 @@ def test_the_film_and_the_drives_are_written_once():
     drives = re.compile(r"\(\s*\"travel\",\s*\"spring\",\s*\"force\"\s*\)")
     written = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "fitting").glob("*.py")
                      if drives.search(p.read_text(encoding="utf-8")))
-    assert written == ["fitting/_io.py"]
-    assert fitting._model.DRIVES is fitting._io.DRIVES
+    assert written == ["fitting/_trace.py"]
+    assert fitting._scales.DRIVES is fitting._model.DRIVES is fitting._trace.DRIVES

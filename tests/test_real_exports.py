@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from fitting import _checks, parse_trace, read_trace, scales_from_trace
-from fitting._io import TraceError, check_force_sign, parse_columns, parse_units
+from fitting._columns import parse_columns, parse_units
+from fitting._trace import TraceError, check_force_sign
 
 SEED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data",
                     "paper_dc140.csv")
@@ -401,20 +402,20 @@ def test_cli_fix_reaches_the_fit(monkeypatch, capsys):
 
 
 def test_fixed_parameters_leave_the_fitted_vector_in_separate_and_joint_layouts():
-    from fitting._fit import _layout
     from fitting._model import ModelSpec
+    from fitting._problem import make_layout
 
     spec = ModelSpec()  # E_star, viscosity, z0, offset
     theta0 = np.log(np.array([[3.9e6, 100.0, 1.4e-4, 1.0], [4.1e6, 90.0, 1.5e-4, 1.0]]))
     theta0[:, 3] = [0.01, -0.02]
-    lay, x0 = _layout([[0, 1]], spec, ["a", "b"], theta0, ("E_star",), ("viscosity",))
+    lay, x0 = make_layout([[0, 1]], spec, ["a", "b"], theta0, ("E_star",), ("viscosity",))
     assert lay.labels[0] == ["E_star", "z0[a]", "offset[a]", "z0[b]", "offset[b]"]
     for t in (0, 1):  # every trace's θ: the fixed viscosity from base, the rest from x
         theta = lay.base[t] + lay.M[t] @ x0[0]
         assert theta[1] == theta0[t, 1]
         assert theta[2] == theta0[t, 2] and theta[3] == theta0[t, 3]
     assert list(lay.active) == [True, False, True, True]
-    lay, x0 = _layout([[0], [1]], spec, ["a", "b"], theta0, (), ("viscosity", "offset"))
+    lay, x0 = make_layout([[0], [1]], spec, ["a", "b"], theta0, (), ("viscosity", "offset"))
     assert lay.labels == [["E_star", "z0"], ["E_star", "z0"]]
 
 
@@ -426,11 +427,11 @@ def test_fixed_parameters_leave_the_fitted_vector_in_separate_and_joint_layouts(
     ({"E_star": 1e6, "viscosity": 1.0, "z0": 1e-4, "offset": 0.0}, (), r"nothing is left to fit"),
 ])
 def test_fixed_values_are_checked(fixed, shared, match):
-    from fitting._fit import _check_fixed
     from fitting._model import ModelSpec
+    from fitting._start import check_fixed
 
     with pytest.raises(ValueError, match=match):
-        _check_fixed(fixed, ModelSpec(), shared)
+        check_fixed(fixed, ModelSpec(), shared)
 
 
 # --------------------------------------------------------------------------- end to end (~15 s)

@@ -84,11 +84,11 @@ assert all(d == 1 and x.shape[0] == 3 for d, x in seen[n_many:])
 # The first call (r, J, min h̄ at the common starting values), sharded against one device.
 (r_n, J_n, film_n), (r_1, J_1, film_1) = ([x[:3] for _, x in seen[k:k + 3]] for k in (0, n_many))
 for t, tr in enumerate(traces):
-    sigma = fitting._model.noise_level(tr.force)  # r = (y - y_data)/σ
+    sigma = fitting.noise_level(tr.force)  # r = (y - y_data)/σ
     peak = np.max(np.abs(tr.force))
     dy = np.max(np.abs(r_n[t] - r_1[t])) * sigma
     print(t, dy / peak, abs(film_n[t] / film_1[t] - 1))
-    # The model's global error is ~ rtol^(2/3) of the peak (fitting._fit._solver_error): two
+    # The model's global error is ~ rtol^(2/3) of the peak (fitting._problem.solver_error): two
     # equally valid runs that took different steps differ by up to that.
     assert dy < s.rtol ** (2 / 3) * peak and abs(film_n[t] / film_1[t] - 1) < s.rtol
 assert all(np.isfinite(r.values["E_star"]) for r in many + one)

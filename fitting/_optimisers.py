@@ -1,0 +1,309 @@
+r"""The optimisers of a fit (``method=``), each on every problem of the fit.
+
+* ``"lm"`` (default): Levenberg–Marquardt on the forward-mode Jacobian J = ∂r/∂x. Step
+  (JᵀJ + λ diag JᵀJ) δ = -Jᵀr, accepted when S decreases (then λ ← λ/3, else λ ← 4λ), with
+  |δ_i| ≤ 1 (a factor e per step in E*, η, z0). A step whose run makes the film negative or
+  non-finite counts as rejected. The Jacobian comes with the residuals at about the cost of one
+  run (the tangents reuse the step's factorisation), so every trial evaluates both: one model run
+  per iteration. As optimistix writes a solver: a state (:class:`LMState`), :func:`lm_init`,
+  :func:`lm_terminate` and :func:`lm_step`, composed by :func:`lm`.
+* ``"trf"``: ``scipy.optimize.least_squares`` (trust-region reflective) on the same residuals
+  and Jacobian, one problem after another (benchmarks/fit_benchmark.py compares the two).
+* ``"lbfgs"``: ``optax.lbfgs`` on S with reverse-mode ``jax.grad`` (the stepper's checkpointed
+  scan), one problem after another. Its line search needs a smoother S than LM does: S is
+  smooth in θ only to the model's tolerance (the steps the controller takes change with θ), and
+  from data/paper_dc140.csv's physics start the zoom line search stalls in that roughness at
+  FIT_SETTINGS' rtol 3e-4, χ² 5.8 above the optimum after 60 iterations (not converged); with
+  ``settings=dataclasses.replace(FIT_SETTINGS, rtol=1e-5)`` (CLI: ``--rtol 1e-5``) it converges
+  in 20 (benchmarks/fit_benchmark.py --only optimisers, docs/accuracy.md, "Optimisers").
+
+Convergence: the Gauss–Newton decrement gᵀ(JᵀJ)⁻¹g with g = Jᵀr, in units of the residual variance
+s² = 2S/(n - p), below ``tol`` (1e-4): the remaining step is under 1 % of a standard error. An
+error-controlled model is smooth in θ only to its tolerance (the step choices change with θ), so
+the cost may stall first: stalled twice with the decrement below ``STALL_DECREMENT``, or no
+decreasing step at all (λ > 1e12) with the decrement below ``NOISE_DECREMENT``, counts as
+converged, at the model's accuracy (the message says which and gives the decrement).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from lubjax._fitting_api import compiler as _compiler
+from lubjax._fitting_api import single_threaded_blas
+
+from . import _model
+from ._problem import Evaluator
+
+STALL_RTOL = 1e-7
+STALL_DECREMENT = 0.05
+#: Where not even a short gradient step (λ > 1e12) lowers the cost, the cost is rough on a finer
+#: scale than the step the quadratic model predicts: the model's own noise. With the decrement
+#: below this the optimum it predicts is within half a standard error (√0.25): converged at the
+#: model's accuracy. Seen on one of 100 noise draws (benchmarks/fit_benchmark.py --only batch):
+#: stuck at decrement 0.096 (0.3 SE), while compiling the model with other (equally valid)
+#: rounding converged 0.2 SE away in 14 iterations.
+NOISE_DECREMENT = 0.25
+METHODS = ("lm", "trf", "lbfgs")
+
+
+def decrement(r, J, s2):
+    """Gauss–Newton decrement gᵀ(JᵀJ)⁻¹g / s²."""
+    g = J.T @ r
+    try:
+        step = np.linalg.lstsq(J.T @ J, g, rcond=None)[0]
+    except np.linalg.LinAlgError:
+        return math.inf
+    return float(g @ step) / max(s2, 1e-300)
+
+
+class Outcome(NamedTuple):
+    x: np.ndarray
+    r: np.ndarray
+    J: np.ndarray
+    iterations: int
+    converged: bool
+    message: str
+
+
+# --------------------------------------------------------------------------- Levenberg–Marquardt
+
+
+@dataclasses.dataclass
+class LMState:
+    """Levenberg–Marquardt's state, one entry per problem (:func:`lm_init`, :func:`lm_step`)."""
+
+    xs: list  # x of each problem
+    current: list  # (r, J, ok) at xs
+    cost: np.ndarray  # S = ½|r|² at xs (inf where the run failed)
+    lam: np.ndarray  # the damping λ
+    done: np.ndarray
+    converged: np.ndarray
+    iterations: np.ndarray  # the last iteration that proposed a step
+    stalled: np.ndarray  # successive trials that did not lower S by STALL_RTOL of it
+    messages: list
+    n_samples: list
+
+    def s2(self, k) -> float:
+        """Problem k's residual variance s² = 2S/(n - p)."""
+        return 2 * self.cost[k] / max(self.n_samples[k] - self.xs[k].size, 1)
+
+
+def lm_init(evaluate: Evaluator, x0s, n_samples) -> LMState:
+    """The state at the starts x0s (one model run); a problem whose run fails there is done."""
+    K = len(x0s)
+    xs = [x.copy() for x in x0s]
+    cur = evaluate(xs)
+    cost = np.array([0.5 * float(rk @ rk) if ok else np.inf for rk, _, ok in cur])
+    state = LMState(xs, cur, cost, np.full(K, 1e-3), np.zeros(K, bool), np.zeros(K, bool),
+                    np.zeros(K, int), np.zeros(K, int), [""] * K, n_samples)
+    for k, (_, _, ok) in enumerate(cur):
+        if not ok:
+            state.done[k] = True
+            state.messages[k] = (
+                "the model run at the starting values failed (a negative film, NaN, or a run "
+                "that stopped before the trace's end: the step budget ran out or the steps "
+                "collapsed)")
+    return state
+
+
+def lm_terminate(state: LMState, tol) -> LMState:
+    """Every problem not yet done whose Gauss–Newton decrement is below ``tol``: converged."""
+    for k in np.flatnonzero(~state.done):
+        r, J, _ = state.current[k]
+        if decrement(r, J, state.s2(k)) < tol:
+            state.done[k], state.converged[k] = True, True
+            state.messages[k] = "converged (Gauss-Newton decrement below tolerance)"
+    return state
+
+
+def lm_step(evaluate: Evaluator, state: LMState, it: int) -> LMState:
+    """Iteration ``it`` of every problem not done: a damped Gauss–Newton step, one model run
+    for all of them, each step accepted or rejected; a problem whose cost stalls, or that finds
+    no decreasing step, ends here (converged at the model's accuracy or stopped)."""
+    xs, cur, cost, lam, done = state.xs, state.current, state.cost, state.lam, state.done
+    trial = [x.copy() for x in xs]
+    for k in np.flatnonzero(~done):
+        r, J, _ = cur[k]
+        A = J.T @ J
+        g = J.T @ r
+        M = A + lam[k] * np.diag(np.diag(A))
+        try:
+            delta = -np.linalg.solve(M, g)
+        except np.linalg.LinAlgError:
+            delta = -g / (np.diag(M) + 1e-300)
+        delta /= max(1.0, float(np.max(np.abs(delta))))
+        trial[k] = xs[k] + delta
+        state.iterations[k] = it
+    new = evaluate(trial, np.flatnonzero(~done))
+    for k in np.flatnonzero(~done):
+        r_try, _, ok = new[k]
+        cost_try = 0.5 * float(r_try @ r_try) if ok else np.inf
+        accept = cost_try < cost[k]
+        small = (not accept) or (cost[k] - cost_try < STALL_RTOL * cost[k])
+        state.stalled[k] = state.stalled[k] + 1 if small else 0
+        if state.stalled[k] >= 2:
+            dec = decrement(cur[k][0], cur[k][1], state.s2(k))
+            if dec < STALL_DECREMENT:
+                done[k], state.converged[k] = True, True
+                state.messages[k] = (f"converged to the model's accuracy (cost stalled; "
+                                     f"Gauss-Newton decrement {dec:.2g})")
+                continue
+        if accept:
+            xs[k], cur[k], cost[k] = trial[k], new[k], cost_try
+            lam[k] = max(lam[k] / 3.0, 1e-9)
+        else:
+            lam[k] *= 4.0
+            if lam[k] > 1e12:
+                done[k] = True
+                dec = decrement(cur[k][0], cur[k][1], state.s2(k))
+                if dec < NOISE_DECREMENT:
+                    state.converged[k] = True
+                    state.messages[k] = (f"converged to the model's accuracy (no decreasing "
+                                         f"step; Gauss-Newton decrement {dec:.2g})")
+                else:
+                    state.messages[k] = (f"stopped: no decreasing step (lambda > 1e12) with "
+                                         f"the Gauss-Newton decrement at {dec:.2g}")
+    return state
+
+
+def lm_outcomes(state: LMState, tol, max_iter) -> list[Outcome]:
+    """Each problem's :class:`Outcome`; one still running after ``max_iter`` iterations is not
+    converged unless its decrement is below ``tol`` after all."""
+    out = []
+    for k in range(len(state.xs)):
+        r, J, _ = state.current[k]
+        conv, msg = bool(state.converged[k]), state.messages[k]
+        if not state.done[k]:
+            msg = f"not converged after {max_iter} iterations"
+        if not conv and np.isfinite(r).all() and decrement(r, J, state.s2(k)) < tol:
+            conv, msg = True, "converged (Gauss-Newton decrement below tolerance)"
+        out.append(Outcome(state.xs[k], r, J, int(state.iterations[k]), conv, msg))
+    return out
+
+
+def lm(evaluate: Evaluator, x0s, n_samples, *, max_iter, tol, progress=None):
+    """Levenberg–Marquardt for every problem at once (one model run per iteration): init, then
+    terminate-or-step until every problem is done or ``max_iter`` is reached."""
+    state = lm_init(evaluate, x0s, n_samples)
+    for it in range(1, max_iter + 1):
+        state = lm_terminate(state, tol)
+        if state.done.all():
+            break
+        state = lm_step(evaluate, state, it)
+        if progress is not None:
+            progress(it, state.cost, state.done)
+    return lm_outcomes(state, tol, max_iter)
+
+
+# --------------------------------------------------------------------------- scipy, optax
+
+
+def _single(evaluate: Evaluator, k, x0s):
+    """(r, J, ok) of problem k alone at x (the others held at their start)."""
+    xs = list(x0s)
+
+    def at(x):
+        xs[k] = x
+        return evaluate(xs, [k])[k]
+
+    return at
+
+
+def trf(evaluate, x0s, n_samples, *, max_iter, tol, progress=None):
+    """scipy.optimize.least_squares (trust-region reflective) per problem, our Jacobian."""
+    from scipy.optimize import least_squares
+
+    out = []
+    for k in range(len(x0s)):
+        at = _single(evaluate, k, x0s)
+        cache = {}
+
+        def fun(x, at=at, cache=cache):
+            key = x.tobytes()
+            if key not in cache:
+                cache.clear()
+                r, J, ok = at(x)
+                if not ok:  # a failed run: a large residual makes the trust region shrink
+                    r, J = np.full_like(r, 1e6), np.zeros_like(J)
+                cache[key] = (r, J)
+            return cache[key][0]
+
+        def jac(x, fun=fun, cache=cache):
+            fun(x)
+            return cache[x.tobytes()][1]
+
+        sol = least_squares(fun, x0s[k], jac=jac, method="trf", x_scale="jac",
+                            max_nfev=max_iter, ftol=1e-10, xtol=1e-10, gtol=1e-10)
+        r, J, ok = at(sol.x)
+        s2 = float(r @ r) / max(n_samples[k] - sol.x.size, 1)
+        dec = decrement(r, J, s2) if ok else math.inf
+        conv = ok and dec < STALL_DECREMENT
+        msg = f"scipy least_squares: {sol.message} (Gauss-Newton decrement {dec:.2g})"
+        out.append(Outcome(sol.x, r, J, int(sol.nfev), conv, msg))
+        if progress is not None:
+            progress(sol.nfev, np.array([sol.cost]), np.array([True]))
+    return out
+
+
+def lbfgs(evaluate, x0s, n_samples, *, max_iter, tol, progress=None):
+    """optax L-BFGS per problem on S = ½|r|², gradient by reverse mode (jax.grad)."""
+    import optax
+
+    spec, solver, lay = evaluate.spec, evaluate.solver, evaluate.layout
+    out = []
+    for k, members in enumerate(evaluate.groups):
+        datas = [jax.tree_util.tree_map(lambda a, t=t: a[t], evaluate.data) for t in members]
+        base = [jnp.asarray(lay.base[t]) for t in members]
+        Ms = [jnp.asarray(lay.M[t]) for t in members]
+
+        def loss(x, datas=datas, base=base, Ms=Ms):
+            total = 0.0
+            for d, b, m in zip(datas, base, Ms):
+                y, film = _model.predict(b + m @ x, d, solver, spec)
+                r = d.weight * (y - d.response) / d.noise
+                total = total + jnp.where(film > 0, 0.5 * jnp.sum(r**2), jnp.inf)
+            return total
+
+        opt = optax.lbfgs()
+        vg = optax.value_and_grad_from_state(loss)
+
+        @_compiler.jit
+        def one(x, state, vg=vg, opt=opt, loss=loss):
+            value, grad = vg(x, state=state)
+            updates, state = opt.update(grad, state, x, value=value, grad=grad, value_fn=loss)
+            return optax.apply_updates(x, updates), state, value
+
+        x = jnp.asarray(x0s[k])
+        state = opt.init(x)
+        at = _single(evaluate, k, x0s)
+        conv, it = False, 0
+        msg = (f"not converged after {max_iter} iterations (L-BFGS's line search stalls where "
+               "the error-controlled model is not smooth: a tighter tolerance, settings with "
+               "rtol=1e-5 or the CLI's --rtol 1e-5, or method 'lm')")
+        for it in range(1, max_iter + 1):
+            with single_threaded_blas():
+                x, state, value = one(x, state)
+            if progress is not None:
+                progress(it, np.array([float(value)]), np.array([False]))
+            if not math.isfinite(float(value)):
+                msg = "stopped: non-finite loss (negative film or NaN)"
+                break
+            if it % 5 == 0:
+                r, J, ok = at(np.asarray(x))
+                s2 = float(r @ r) / max(n_samples[k] - x.size, 1)
+                if ok and decrement(r, J, s2) < STALL_DECREMENT:
+                    conv, msg = True, "converged (Gauss-Newton decrement below tolerance)"
+                    break
+        r, J, _ = at(np.asarray(x))
+        out.append(Outcome(np.asarray(x), r, J, it, conv, msg))
+    return out
+
+
+OPTIMISERS = {"lm": lm, "trf": trf, "lbfgs": lbfgs}
