@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import lubjax
+from lubjax._fitting_api import estimate as _estimate
 from lubjax._fitting_api import sharding as _sharding
 from lubjax._fitting_api import single_threaded_blas
 
@@ -187,15 +188,15 @@ def solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, mesh, grou
     """Signed error of the model response at the optimum, per problem in residual units.
 
     One extra run on the nested coarse mesh (every other node) at ``Tolerance.loosened()``
-    (8·rtol): taking the spatial error as second order (×4 at twice the spacing) and the global
-    time error ∝ rtol^{2/3} (×4 at 8·rtol), both grow by the same factor and
-    y_coarse,8rtol - y ≈ 3 (error of y), so the error is (y_coarse,8rtol - y)/3. This is not
-    ``lubjax.relax``'s estimate (``lubjax._solve.error_estimate``: two runs, separate space and
-    time parts at the lower orders 3/2 and 1/2, times a safety factor of 3), which bounds the
-    error pointwise; here the signed error enters the budget as a parameter shift
-    (:func:`fitting._stats.summarise`), where a bound would be too large. In residual units
-    (r = w (y - y_data)/σ) it is (r_coarse,8rtol - r)/3; the run is the fit's own model (the
-    response only: no Jacobian) on the other solver."""
+    (8·rtol), with Richardson's estimate (``lubjax._estimate.richardson``) at the scheme's
+    asymptotic orders: space 2 (×4 at twice the spacing) and time 2/3 in rtol (×4 at 8·rtol).
+    Both errors grow by the same factor, so y_coarse,8rtol - y ≈ 3 (error of y) and one run
+    gives the error, (y_coarse,8rtol - y)/3. ``lubjax.relax``'s estimate
+    (``lubjax._estimate.error_estimate``) separates space and time with two runs at the lower
+    orders 3/2 and 1/2, times a safety factor of 3: a pointwise bound. Here the signed error
+    enters the budget as a parameter shift (:func:`fitting._stats.summarise`), where a bound
+    would be too large. In residual units (r = w (y - y_data)/σ) it is (r_coarse,8rtol - r)/3;
+    the run is the fit's own model (the response only: no Jacobian) on the other solver."""
     mesh = mesh.coarsened()
     tol = settings.tolerance()
     loose = _model.Solver(lubjax.stepper.discretise(mesh), tol.loosened())
@@ -204,7 +205,8 @@ def solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, mesh, grou
     predict = evaluate.batched(1, "predict")
     y_loose = evaluate.run(evaluate.thetas(xs), evaluate.place(data, loose), predict)[0]
     r_loose = np.array(data.weight * (y_loose - data.response) / data.noise[:, None])
-    err = (r_loose - r_fit) / 3.0
+    # 8^{2/3} = 2^2: the one run's space and time errors grow alike, by 2^2
+    err = _estimate.richardson(r_loose - r_fit, 2.0, _estimate.SMOOTH_SPACE_ORDER)
     err[~np.isfinite(err)] = 0.0
     return [np.concatenate([err[t] for t in g]) for g in groups]
 

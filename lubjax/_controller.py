@@ -62,6 +62,10 @@ BACKWARD_EULER_FORCE = 10.0 * FORCE_ATOL
 TAIL_TIGHTENING = 3.0
 
 
+#: How much looser the error estimates' time-coarsened runs are (:meth:`Tolerance.loosened`).
+LOOSENING = 8.0
+
+
 @dataclasses.dataclass(frozen=True)
 class Tolerance:
     """What the controller needs. A pytree: the numbers (rtol, atol, initial_step,
@@ -100,9 +104,9 @@ class Tolerance:
         """The error estimate's time-coarsened partner of this tolerance.
 
         Returns:
-            Tolerance: rtol × 8 (at most 0.1), the rest as is.
+            Tolerance: rtol × ``LOOSENING`` (8; at most 0.1), the rest as is.
         """
-        return dataclasses.replace(self, rtol=min(8 * self.rtol, 0.1))
+        return dataclasses.replace(self, rtol=min(LOOSENING * self.rtol, 0.1))
 
 
 register(Tolerance, data=("rtol", "atol", "initial_step", "force_floor"),

@@ -9,7 +9,7 @@
 * :class:`Parser` and :func:`run_cli` give each failure one line on stderr and an exit status:
   ``EXIT_USAGE`` (2) for bad usage or input, ``EXIT_FAILED`` (1) for a run that failed.
 * :func:`read_load_csv` reads the load history of ``lubjax creep --load-csv`` (the traces of
-  ``lubjax-fit`` are read by :mod:`fitting._io`, which lubjax does not import).
+  ``lubjax-fit`` are read by :mod:`fitting._csv`, which lubjax does not import).
 
 The options the two command lines share are in :mod:`lubjax._cli_options`; ``fitting`` may
 import both modules.

@@ -280,3 +280,17 @@ def test_the_film_and_the_drives_are_written_once():
                      if drives.search(p.read_text(encoding="utf-8")))
     assert written == ["fitting/_trace.py"]
     assert fitting._scales.DRIVES is fitting._model.DRIVES is fitting._trace.DRIVES
+
+
+def test_relax_and_the_fits_share_richardson_and_the_observed_orders():
+    """One formula, one set of measured orders: relax's bound takes the lower ones; the fits'
+    one-run estimate needs the asymptotic ones to grow alike at twice the spacing and 8 rtol."""
+    from lubjax import _estimate
+
+    assert _estimate.SPACE_ORDER == _estimate.EDGE_SPACE_ORDER
+    assert _estimate.TIME_ORDER == _estimate.EULER_TIME_ORDER
+    assert _estimate.LOOSENING ** _estimate.BDF2_TIME_ORDER == pytest.approx(
+        2.0 ** _estimate.SMOOTH_SPACE_ORDER, rel=1e-12)
+    assert lubjax.Settings(rtol=1e-4).tolerance().loosened().rtol == pytest.approx(
+        _estimate.LOOSENING * 1e-4, rel=1e-15)
+    assert _estimate.richardson(3.0, 2.0, 2.0) == 1.0
