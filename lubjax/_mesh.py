@@ -444,10 +444,16 @@ def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
     beta, t_end = float(beta), float(t_end)
     rim = _contact_edge(settings, drive, z0)
     if drive.inertia:  # a free sphere: a collision, not a contact the run ends in
-        rim = rim if settings.contact_radius == "auto" else None
+        rim = None
+        if settings.contact_radius == "auto":
+            rim = final_contact_radius(drive, float(z0), mesh_parameters(settings)[0])
         if rim is not None and not film_held_by_force(settings.film_error, beta):
+            # a rebound contact reaching the fine zone's end widens it: its film is thinnest
+            # near the edge there (St = 1000 at ε = 10⁻³ was 2.9 % off on the plain mesh)
+            if rim >= 0.95 * settings.r_fine:
+                settings = dataclasses.replace(settings, r_fine=1.25 * rim)
             collision = _collision_refinement(settings, drive, z0, beta, rim)
-            return settings.mesh(rim, collision, collision)
+            return settings_mesh(settings, rim, collision, collision)
         return settings.mesh(None, _interior_refinement(settings, beta, t_end),
                              _rim_refinement(settings, beta, t_end))
     if rim is not None and rim > 0 and film_held_by_force(settings.film_error, beta):
