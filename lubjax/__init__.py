@@ -31,6 +31,7 @@ from ._drives import FreeSphere, Load, Spring, Travel, as_drive, restitution  # 
 from ._indenter import RampHold, SampledTravel  # noqa: E402
 from ._layer import layer_thickness_bar  # noqa: E402
 from ._mesh import Mesh, graded_mesh, mesh_for, uniform_mesh  # noqa: E402
+from ._shape import Paraboloid, Sphere, sneddon_sphere  # noqa: E402
 from ._solve import (  # noqa: E402
     Plan,
     Result,
@@ -67,6 +68,7 @@ __all__ = [
     "Load",
     "Mesh",
     "POISSON_RANGE",
+    "Paraboloid",
     "Plan",
     "RampHold",
     "RelaxationTest",
@@ -74,6 +76,7 @@ __all__ = [
     "SampledTravel",
     "Settings",
     "SolverError",
+    "Sphere",
     "Spring",
     "SweepResult",
     "Travel",
@@ -100,6 +103,7 @@ __all__ = [
     "rigid_squeeze_force",
     "rigid_squeeze_pressure",
     "si_scales",
+    "sneddon_sphere",
     "spring_stiffness_bar",
     "stepper",
     "sweep",

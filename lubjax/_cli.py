@@ -19,13 +19,14 @@ import time
 
 import numpy as np
 
-from ._checks import MAX_TRAVEL_OVER_RADIUS
+from ._checks import travel_over_radius_problem
 from ._cli_options import (
     POISSON_TEXT,
     accuracy_settings,
     add_accuracy_options,
     add_cache_flag,
     add_debug_flag,
+    add_indenter_option,
     add_substrate_options,
     check_substrate_options,
     example_lines,
@@ -174,6 +175,7 @@ def _add_relax_command(sub):
     si.add_argument("--speed", type=float, help="approach speed v0 [m/s]")
     si.add_argument("--indent", type=float, help="travel d_c [m]")
     si.add_argument("--gap", type=float, help="initial gap z0 [m]")
+    add_indenter_option(si)
     _add_substrate(r, dimensionless=True)
     r.add_argument(
         "--dr", type=positive_float, default=None, help="fine-zone mesh spacing (Settings.dr)"
@@ -198,6 +200,7 @@ def _add_creep_command(sub):
     c.add_argument("--hold", type=float, default=None, help="hold time after the ramp [s]")
     c.add_argument("--load-csv", help="a load history instead: CSV with time_s,force_N")
     c.add_argument("--gap", type=float, help="initial gap z0 [m]")
+    add_indenter_option(c)
     _add_substrate(c)
     _add_accuracy(c)
     return c
@@ -374,13 +377,10 @@ def _require(args, names):
         raise UsageError("this command needs --" + ", --".join(missing))
 
 
-def _check_thin(name, value, radius):
-    if value > MAX_TRAVEL_OVER_RADIUS * radius:
-        raise UsageError(
-            f"{name} {value:g} m is {value / radius:.3g} radii (--radius {radius:g} m); the "
-            f"thin-film model needs it ≪ R (at most {MAX_TRAVEL_OVER_RADIUS:g} R). Are the "
-            "lengths in metres?"
-        )
+def _check_thin(name, value, radius, indenter="paraboloid"):
+    problem = travel_over_radius_problem(name, value, radius, indenter)
+    if problem:
+        raise UsageError(problem)
 
 
 def _check_end(t_end: float, given: str, time_scale: float | None = None, t_c: str = "",
@@ -479,7 +479,8 @@ def _creep(args) -> int:
         load, ramp = float(fs[peak]), float(ts[peak] - ts[0])
         if ramp <= 0:
             raise UsageError(f"{args.load_csv}: the load must rise from its first row")
-        test = CreepTest(e_star, args.radius, args.viscosity, load, ramp, args.gap)
+        test = CreepTest(e_star, args.radius, args.viscosity, load, ramp, args.gap,
+                         args.indenter)
         history = SampledTravel((ts - ts[0]) / ramp, fs / load)
         t_end = _check_end((ts[-1] - ts[0]) / ramp, f"{args.load_csv}: the load history",
                            ramp, "the time to the peak load",
@@ -488,13 +489,14 @@ def _creep(args) -> int:
         _require(args, ["load", "ramp-time", "hold"])
         if not (math.isfinite(args.hold) and args.hold >= 0):
             raise UsageError(f"--hold must be >= 0 s, got {args.hold}")
-        test = CreepTest(e_star, args.radius, args.viscosity, args.load, args.ramp_time, args.gap)
+        test = CreepTest(e_star, args.radius, args.viscosity, args.load, args.ramp_time, args.gap,
+                         args.indenter)
         ramp = args.ramp_time
         t_end = _check_end((ramp + args.hold) / ramp,
                            f"--ramp-time + --hold = {ramp + args.hold:g} s", ramp, "--ramp-time",
                            lambda limit: f"give --hold <= {_at_most(limit - ramp)} s")
-    _check_thin("--gap", test.gap, test.radius)
-    _check_thin("the Hertz indentation under the load", test.indent, test.radius)
+    _check_thin("--gap", test.gap, test.radius, test.indenter)
+    _check_thin("the Hertz indentation under the load", test.indent, test.radius, test.indenter)
     check_parameters(test.beta, test.z0_bar)
     settings = _settings(args)
     # d_c = the Hertz indentation at E* (the relaxed one if viscoelastic), t_c = the ramp time
@@ -507,7 +509,7 @@ def _creep(args) -> int:
     with progress_line("creep") as phase:
         res = relax(test.beta, test.z0_bar, t_end, drive=test.drive(history),
                     settings=settings, profile_times=profile_times, substrate=substrate,
-                    progress=phase)
+                    progress=phase, indenter=test.shape)
     out = _result_json(res, test, z0_m=test.gap)
     out.update(load_N=test.load, hertz_indentation_m=test.indent,
                settings=dataclasses.asdict(settings), substrate=record)
@@ -648,9 +650,9 @@ def _si_test(args):
     if missing:
         raise UsageError("SI mode needs --" + ", --".join(missing))
     test = RelaxationTest(_modulus(args), args.radius, args.viscosity, args.speed, args.indent,
-                          args.gap)
+                          args.gap, args.indenter)
     for name, value in [("--indent", test.indent), ("--gap", test.gap)]:
-        _check_thin(name, value, test.radius)
+        _check_thin(name, value, test.radius, test.indenter)
     return test
 
 
@@ -682,6 +684,9 @@ def _relax(args) -> int:
         raise UsageError("give either --beta/--z0 or SI parameters, not both")
     if not si_given and (args.beta is None or args.z0 is None):
         raise UsageError("give --beta and --z0, or the SI parameters (see lubjax relax --help)")
+    if not si_given and args.indenter == "sphere":
+        raise UsageError("--indenter sphere needs the SI parameters: the sphere's profile "
+                         "depends on d_c/R (--indent, --radius), which --beta/--z0 do not give")
     outputs = [("--out", args.out), ("--plot", args.plot)]
     check_outputs(outputs)
     test = _si_test(args) if si_given else None
@@ -705,7 +710,7 @@ def _relax(args) -> int:
     prepare_outputs(outputs)
     with progress_line("relax") as phase:
         res = relax(beta, z0, t_end, settings=settings, profile_times=profile_times,
-                    substrate=substrate, progress=phase)
+                    substrate=substrate, progress=phase, indenter=test.shape if test else None)
     out = _result_json(res, test)
     out.update(settings=dataclasses.asdict(settings), substrate=record)
     if line:

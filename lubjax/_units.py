@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from ._checks import check_poisson, check_quantity
+from ._checks import INDENTERS, check_choice, check_poisson, check_quantity
 
 
 def _check_fields(obj, fields) -> None:
@@ -145,10 +145,24 @@ def reduced_radius(R1: float, R2: float = math.inf) -> float:
 
 
 class _Scene:
-    """What every SI scene derives from :func:`si_scales` (its own ``_si_scales()``)."""
+    """What every SI scene derives from :func:`si_scales` (its own ``_si_scales()``), and the
+    indenter's shape its ``indenter`` names."""
 
     def _si_scales(self) -> dict:
         raise NotImplementedError
+
+    def _check_indenter(self) -> None:
+        check_choice("indenter", self.indenter, INDENTERS)
+
+    @property
+    def shape(self):
+        """The shape :func:`lubjax.relax` takes (``indenter=``): ``Paraboloid()``, or for
+        ``indenter="sphere"`` ``Sphere(d_c/R)`` with this scene's depth scale d_c."""
+        from ._shape import Paraboloid, Sphere
+
+        if self.indenter == "sphere":
+            return Sphere(self.scales["gap_m"] / self.radius)
+        return Paraboloid()
 
     @property
     def scales(self) -> dict:
@@ -187,6 +201,8 @@ class RelaxationTest(_Scene):
         speed: approach speed v0 [m/s].
         indent: travel d_c [m].
         gap: initial gap z0 [m].
+        indenter: "paraboloid" (default, eq 8a: d_c, z0 ≪ R) or "sphere" (its true profile,
+            for deep indentation; ``shape``).
     """
 
     E_star: float
@@ -195,6 +211,7 @@ class RelaxationTest(_Scene):
     speed: float
     indent: float
     gap: float
+    indenter: str = "paraboloid"
 
     def __post_init__(self):
         _check_fields(
@@ -208,6 +225,7 @@ class RelaxationTest(_Scene):
                 ("gap", "m"),
             ],
         )
+        self._check_indenter()
 
     @classmethod
     def from_E(cls, E: float, poisson_ratio: float, **kw) -> RelaxationTest:
@@ -267,6 +285,8 @@ class CreepTest(_Scene):
         load: F, the held load [N].
         ramp_time: the load's ramp time t_c [s].
         gap: z0, the initial gap [m].
+        indenter: "paraboloid" (default) or "sphere" (``shape``; d_c stays Hertz's δ∞, a
+            scale: the sphere's own indentation under the load is deeper).
 
     Scales (docs/model.md, "Drives"): d_c = δ∞, Hertz's indentation under the load, and
     t_c = ``ramp_time``, so that the dimensionless load plateau is F̄ = 2π/3 and the gap tends to
@@ -280,6 +300,7 @@ class CreepTest(_Scene):
     load: float
     ramp_time: float
     gap: float
+    indenter: str = "paraboloid"
 
     def __post_init__(self):
         _check_fields(
@@ -293,6 +314,7 @@ class CreepTest(_Scene):
                 ("gap", "m"),
             ],
         )
+        self._check_indenter()
 
     @property
     def indent(self) -> float:
