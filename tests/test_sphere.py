@@ -127,6 +127,31 @@ def test_paraboloid_is_the_sphere_as_epsilon_vanishes():
     assert gaps[1] / gaps[0] == pytest.approx(10.0, rel=0.2)
 
 
+def test_rigid_squeeze_film_of_the_true_sphere():
+    # β = 10⁶, z̄0 = 2 (no contact: rigid, eq 12b's limit) with ε = 0.05: Reynolds' film under
+    # a rigid approach, p̄' = ż̄ r̄/(2β h̄³), p̄(L̄) = 0, gives F̄ = π(-ż̄)/(2β) ∫₀^L̄ r̄³/h̄³ dr̄
+    # with h̄ = z̄ + s(r̄): 1/z̄ for the paraboloid, by quadrature for the sphere.
+    beta, z0, eps = 1e6, 2.0, 0.05
+    settings = lubjax.Settings(rtol=1e-5, error_estimate=False)
+    res = lubjax.relax(beta, z0, 0.5, settings=settings, indenter=Sphere(eps))
+    length, times = res.r[-1], np.linspace(0.1, 0.5, 5)
+    edge = 1.0 / np.sqrt(eps)
+
+    def integral(z):
+        def f(r):
+            return r**3 / (z + Sphere(eps).profile(np.array([r]))[0]) ** 3
+
+        return sum(quad(f, lo, hi, epsrel=1e-12, limit=200)[0]
+                   for lo, hi in ((0.0, edge), (edge, 10 * edge), (10 * edge, length)))
+
+    exact = np.array([np.pi / (2 * beta) * integral(z0 - t) for t in times])
+    assert np.max(np.abs(res.at(times) / exact - 1)) < 1e-3
+    # the paraboloid's 1/z̄ is ~40 % above it at h/R = 0.075-0.1: the squeeze film's r̄⁻⁴ tail
+    # reaches r ~ R, where the two part (relative -3 (h/R) ln(R/h) as h/R → 0)
+    paraboloid = np.pi / (2 * beta * (z0 - times))
+    assert np.all(paraboloid / exact - 1 > 0.3)
+
+
 @pytest.mark.slow
 def test_sphere_with_a_draining_film_tends_to_sneddon():
     eps, z0 = 0.6, 0.1
