@@ -26,9 +26,11 @@ the force. The trace is SI from then on (``metadata["read_as"]`` says what was c
 
 Every malformed input raises :class:`TraceError` (a ``ValueError``) naming the file, the line
 (1-based) and, for cell errors, the column. Scales the thin-film model cannot describe (travel
-beyond ``MAX_TRAVEL_OVER_RADIUS`` R, |force| above ``MAX_FORCE_N``, R outside ``RADIUS_RANGE_M``)
-are refused the same way, with the likely unit mistake (:func:`check_scales`), and so is a
-force negative in compression (:func:`check_force_sign`, once the drive is known).
+beyond ``MAX_SPHERE_TRAVEL_OVER_RADIUS`` R, |force| above ``MAX_FORCE_N``, R outside
+``RADIUS_RANGE_M``) are refused the same way, with the likely unit mistake
+(:func:`check_scales`); a fit with the default paraboloid refuses travel beyond
+``MAX_TRAVEL_OVER_RADIUS`` R (naming ``--indenter sphere``), and so is a force negative in
+compression refused (:func:`check_force_sign`, once the drive is known).
 
 Reading is numpy-fast: the numeric block goes through ``numpy.loadtxt``; only a file that it
 rejects is parsed again line by line, to name the offending line and column. A zip archive
@@ -56,6 +58,7 @@ from lubjax._files import write_text
 from lubjax._fitting_api import checks as _checks
 
 MAX_TRAVEL_OVER_RADIUS = _checks.MAX_TRAVEL_OVER_RADIUS
+MAX_SPHERE_TRAVEL_OVER_RADIUS = _checks.MAX_SPHERE_TRAVEL_OVER_RADIUS
 
 COLUMNS = ("time_s", "displacement_m", "force_N")
 MIN_ROWS = 10
@@ -166,24 +169,32 @@ def _check_model_keys(metadata: dict, where) -> None:
             )
 
 
-def check_scales(trace: Trace) -> None:
+def check_scales(trace: Trace, indenter: str = "paraboloid") -> None:
     """TraceError unless the trace's scales fit the thin-film model (see module docstring).
 
     The model needs travel d ≪ R (and gap z0 ≪ R): a trace whose |displacement| exceeds
-    ``MAX_TRAVEL_OVER_RADIUS`` R is refused, as is |force| > ``MAX_FORCE_N``. Both catch a
-    column in the wrong unit (mm or μm for m, mN for N) that would otherwise fit to nonsense.
+    ``MAX_TRAVEL_OVER_RADIUS`` R is refused for the paraboloid (the message names the fix,
+    ``--indenter sphere``), more than ``MAX_SPHERE_TRAVEL_OVER_RADIUS`` R for the sphere, as is
+    |force| > ``MAX_FORCE_N``. Both catch a column in the wrong unit (mm or μm for m, mN for N)
+    that would otherwise fit to nonsense. The readers check for the sphere, the widest limit;
+    a fit checks again for its own indenter (``fitting._model.trace_data``).
     """
     name = trace.name or "trace"
     r = float(trace.radius)
     travel = float(np.max(np.abs(trace.displacement))) if trace.displacement.size else 0.0
-    if travel > MAX_TRAVEL_OVER_RADIUS * r:
+    limit = _checks.max_travel_over_radius(indenter)
+    if travel > MAX_SPHERE_TRAVEL_OVER_RADIUS * r:
         raise TraceError(
             f"{name}: column displacement_m: the travel reaches {travel:.4g} m, "
             f"{travel / r:.3g} times the radius R = {r:g} m; the thin-film model needs travel "
-            f"≪ R and refuses more than {MAX_TRAVEL_OVER_RADIUS:g} R. Is displacement_m in "
+            f"≪ R and refuses more than {limit:g} R. Is displacement_m in "
             "millimetres or micrometres instead of metres? Declare it: --units displacement=um "
             "(or a '# units: displacement=um' line)"
         )
+    problem = _checks.travel_over_radius_problem(f"{name}: the travel", travel, r, indenter,
+                                                 "radius_m")
+    if problem:
+        raise TraceError(problem)
     peak = float(np.max(np.abs(trace.force))) if trace.force.size else 0.0
     if peak > MAX_FORCE_N:
         raise TraceError(
@@ -293,7 +304,7 @@ def make_trace(time, displacement, force, radius, metadata=None, name: str = "")
     _check_model_keys(meta, lambda key: label)
     meta.setdefault("radius_m", repr(r))
     trace = Trace(t, d, f, r, meta, name)
-    check_scales(trace)
+    check_scales(trace, "sphere")
     return trace
 
 
@@ -728,7 +739,7 @@ def _finish(name: str, lay: _Layout, data: np.ndarray) -> Trace:
     cols = [np.ascontiguousarray(data[:, k]) * s if s != 1.0 else np.ascontiguousarray(data[:, k])
             for k, s in enumerate(lay.scale)]
     trace = Trace(*cols, lay.radius, lay.metadata, name)
-    check_scales(trace)
+    check_scales(trace, "sphere")
     return trace
 
 

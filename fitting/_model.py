@@ -65,7 +65,7 @@ from lubjax._fitting_api import compiler as _compiler
 from lubjax._fitting_api import motion_start
 from lubjax._fitting_api import sharding as _sharding
 
-from ._io import DRIVES, Trace, check_force_sign
+from ._io import DRIVES, Trace, check_force_sign, check_scales
 
 FIT_SETTINGS = lubjax.Settings(rtol=3e-4, force_floor=1e-5, max_steps=5000,
                                film_error="relative")
@@ -94,20 +94,24 @@ class ModelSpec:
         viscoelastic: fit a standard linear solid (E0/E∞, τ) instead of an elastic solid
             (default False).
         fit_offset: fit a constant offset of the response channel (default True).
+        indenter: "paraboloid" (default: travel ≤ 0.2 R) or "sphere", the sphere's true
+            profile for deep indentation (``lubjax.Sphere(d_c/R)`` per trace).
 
     Raises:
-        ValueError: an unknown ``drive``, or a ``layer`` not (thickness, Poisson's ratio,
-            base) in range.
+        ValueError: an unknown ``drive`` or ``indenter``, or a ``layer`` not (thickness,
+            Poisson's ratio, base) in range.
     """
 
     drive: str = "travel"
     layer: tuple | None = None
     viscoelastic: bool = False
     fit_offset: bool = True
+    indenter: str = "paraboloid"
 
     def __post_init__(self):
         if self.drive not in DRIVES:
             raise ValueError(f"drive must be one of {', '.join(DRIVES)}, got {self.drive!r}")
+        _checks.check_choice("indenter", self.indenter, _checks.INDENTERS)
         if self.layer is not None:
             try:
                 h, nu, base = self.layer
@@ -341,7 +345,8 @@ class TraceData(NamedTuple):
         noise: σ, the residuals' unit [N or m].
         drive_unit: the load F_end/``force_scale_unit`` or the spring's π k/(2√(R d_c)) [Pa];
             ÷ E* gives the drive's dimensionless number.
-        disc: a layer's own discretisation (its influence matrix), or None: the solver's.
+        disc: the trace's own discretisation (a layer's influence matrix, the sphere's
+            profile for its d_c/R), or None: the solver's.
     """
 
     history: lubjax.SampledTravel
@@ -447,9 +452,11 @@ def trace_data(
     response = _channels(trace, spec.drive)[1]
     R, dc, tc = scales.radius, scales.indent, scales.time_scale
     fsu = scales.force_scale(1.0)
-    disc = None if spec.layer is None else _layer_disc(
-        FIT_SETTINGS.mesh() if mesh is None else mesh, layer_substrate(spec, scales)
-    )
+    check_scales(trace, spec.indenter)
+    shape = lubjax.Sphere(dc / R) if spec.indenter == "sphere" else None
+    disc = None if spec.layer is None and shape is None else _layer_disc(
+        FIT_SETTINGS.mesh() if mesh is None else mesh,
+        None if spec.layer is None else layer_substrate(spec, scales), shape)
     sigma = max(noise_level(response), 1e-6 * scales.response_unit)
     return TraceData(
         history=hist,
@@ -468,9 +475,9 @@ def trace_data(
     )
 
 
-def _layer_disc(mesh, layer):
+def _layer_disc(mesh, layer, shape=None):
     try:
-        return lubjax.stepper.discretise(mesh, layer)
+        return lubjax.stepper.discretise(mesh, layer, shape)
     except ImportError as exc:  # lubjax/_layer.py (the layer's influence matrix) is missing
         raise RuntimeError(
             f"the layer substrate needs the layer's influence matrix (lubjax/_layer.py), which "

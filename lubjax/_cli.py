@@ -383,6 +383,20 @@ def _check_thin(name, value, radius, indenter="paraboloid"):
         raise UsageError(problem)
 
 
+def _check_thin_given(args, names):
+    """:func:`_check_thin` of the options ``names`` (travels and gaps) in the options' own
+    words, before the SI test class refuses them in its own; a value the class refuses for
+    another reason (not positive, not finite) is left to it."""
+    def usable(x):
+        return x is not None and math.isfinite(x) and x > 0
+
+    if usable(args.radius):
+        for name in names:
+            value = getattr(args, name)
+            if usable(value):
+                _check_thin(f"--{name}", value, args.radius, args.indenter)
+
+
 def _check_end(t_end: float, given: str, time_scale: float | None = None, t_c: str = "",
                fix=None) -> float:
     """The end time t̄ (``t_end``, t_c units), refused beyond the solver's ``T_END_MAX`` in the
@@ -468,6 +482,7 @@ def _creep(args) -> int:
 
     e_star = _modulus(args)
     _require(args, ["viscosity", "radius", "gap"])
+    _check_thin_given(args, ("gap",))
     outputs = [("--out", args.out), ("--plot", args.plot)]
     check_outputs(outputs, inputs=[args.load_csv] if args.load_csv else ())
     history = None
@@ -649,11 +664,9 @@ def _si_test(args):
         missing.append("E-star (or --E with --poisson)")
     if missing:
         raise UsageError("SI mode needs --" + ", --".join(missing))
-    test = RelaxationTest(_modulus(args), args.radius, args.viscosity, args.speed, args.indent,
+    _check_thin_given(args, ("indent", "gap"))
+    return RelaxationTest(_modulus(args), args.radius, args.viscosity, args.speed, args.indent,
                           args.gap, args.indenter)
-    for name, value in [("--indent", test.indent), ("--gap", test.gap)]:
-        _check_thin(name, value, test.radius, test.indenter)
-    return test
 
 
 def relax_summary(res, test=None) -> str:

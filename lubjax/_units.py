@@ -5,7 +5,13 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from ._checks import INDENTERS, check_choice, check_poisson, check_quantity
+from ._checks import (
+    INDENTERS,
+    check_choice,
+    check_poisson,
+    check_quantity,
+    travel_over_radius_problem,
+)
 
 
 def _check_fields(obj, fields) -> None:
@@ -151,8 +157,15 @@ class _Scene:
     def _si_scales(self) -> dict:
         raise NotImplementedError
 
-    def _check_indenter(self) -> None:
+    def _check_indenter(self, **lengths) -> None:
+        """The ``indenter`` a choice, and each of ``lengths`` (name: metres, a travel or gap)
+        within its limit (``lubjax._checks.travel_over_radius_problem``)."""
         check_choice("indenter", self.indenter, INDENTERS)
+        for name, value in lengths.items():
+            problem = travel_over_radius_problem(name, value, self.radius, self.indenter,
+                                                 "radius")
+            if problem:
+                raise ValueError(problem)
 
     @property
     def shape(self):
@@ -203,6 +216,11 @@ class RelaxationTest(_Scene):
         gap: initial gap z0 [m].
         indenter: "paraboloid" (default, eq 8a: d_c, z0 ≪ R) or "sphere" (its true profile,
             for deep indentation; ``shape``).
+
+    Raises:
+        ValueError: a value not positive and finite, an unknown ``indenter``, or ``indent``
+            or ``gap`` beyond the indenter's limit (0.2 R for the paraboloid, the message
+            naming the sphere; R for the sphere).
     """
 
     E_star: float
@@ -225,7 +243,7 @@ class RelaxationTest(_Scene):
                 ("gap", "m"),
             ],
         )
-        self._check_indenter()
+        self._check_indenter(indent=self.indent, gap=self.gap)
 
     @classmethod
     def from_E(cls, E: float, poisson_ratio: float, **kw) -> RelaxationTest:
@@ -314,7 +332,7 @@ class CreepTest(_Scene):
                 ("gap", "m"),
             ],
         )
-        self._check_indenter()
+        self._check_indenter(gap=self.gap)
 
     @property
     def indent(self) -> float:

@@ -101,17 +101,19 @@ def test_near_dry_hold_is_sneddons_sphere(eps, z0):
 def test_sphere_converges_under_mesh_refinement():
     eps, z0 = 0.6, 0.1
     sneddon = sneddon_force_bar(eps, z0)
-    drs = np.array([0.04, 0.028, 0.02, 0.014, 0.01])
+    drs = np.array([0.056, 0.04, 0.028, 0.02, 0.014])
     errors = []
     for dr in drs:
-        settings = lubjax.Settings(rtol=1e-5, error_estimate=False, dr=dr, contact_radius=None)
+        settings = lubjax.Settings(rtol=1e-4, error_estimate=False, dr=dr, contact_radius=None)
         res = lubjax.relax(DRY_BETA, z0, DRY_T, settings=settings, indenter=Sphere(eps))
-        errors.append(abs(res.force[-1] / sneddon - 1))
+        errors.append(res.force[-1] / sneddon - 1)
+    errors = np.abs(errors)
+    # measured: 1.2e-3, 4.8e-4, -4.6e-5 (the contact's edge crossing a node), 1.1e-4, 5.6e-5:
+    # order ~2 with the scatter of an edge moving through the cells, below the 3/2 of the √
+    # edge that the error estimate assumes (lubjax/_solve.py) everywhere
     order = np.polyfit(np.log(drs), np.log(errors), 1)[0]
-    # the √ edge of the contact limits the scheme's second order (as the paraboloid's Hertz
-    # contact does: docs/accuracy.md): observed 1.5-2
-    assert 1.3 < order < 2.5, (order, errors)
-    assert errors[-1] < 1e-4
+    assert 1.5 < order < 3.0, (order, errors)
+    assert np.all(errors < 0.1 * drs**1.5), errors
 
 
 def test_paraboloid_is_the_sphere_as_epsilon_vanishes():
@@ -197,3 +199,22 @@ def test_sphere_validity_and_the_paraboloids_message(capsys):
         lubjax.RelaxationTest(3.92e6, 2e-3, 100.0, 1e-4, 1e-3, 1e-4, indenter="cone")
     test = lubjax.RelaxationTest(3.92e6, 2e-3, 100.0, 1e-4, 1e-3, 1e-4, indenter="sphere")
     assert test.shape == Sphere(0.5)
+
+
+@pytest.mark.slow
+def test_a_fit_with_the_sphere_recovers_a_deep_indentation():
+    import fitting
+
+    test = lubjax.RelaxationTest(3.92e6, 2e-3, 100.0, 1e-4, 0.8e-3, 0.1e-3, indenter="sphere")
+    times = np.linspace(0.0, 3.0, 241)
+    res = lubjax.relax(test.beta, test.z0_bar, 3.0, indenter=test.shape,
+                       settings=lubjax.Settings(rtol=1e-5, error_estimate=False))
+    trace = fitting.make_trace(times * test.time_scale, np.clip(times, 0, 1) * test.indent,
+                               np.asarray(res.at(times)) * test.force_scale, test.radius,
+                               name="sphere_0.4R")
+    with pytest.raises(ValueError, match="--indenter sphere"):
+        fitting.fit_trace(trace, settings=FAST)
+    fit = fitting.fit_trace(trace, spec=fitting.ModelSpec(indenter="sphere"), settings=FAST)
+    assert fit.values["E_star"] == pytest.approx(test.E_star, rel=2e-2)
+    assert fit.values["viscosity"] == pytest.approx(test.viscosity, rel=5e-2)
+    assert fit.values["z0"] == pytest.approx(test.gap, rel=5e-2)
