@@ -70,9 +70,10 @@ CURVES = [
 ]
 
 
-def nanite_E(path, index, radius, window=None):
-    """nanite's Hertz (paraboloid) E on the approach; ``window``: (first, last) time [s] of the
-    samples to fit (the file's time), else the whole approach."""
+def nanite_E(path, index, radius, window=None, model="hertz_para"):
+    """nanite's E on the approach by its ``model`` (default ``hertz_para``, Hertz's paraboloid;
+    ``sneddon_spher`` needs the nanite-model-sneddon-spher package); ``window``: (first, last)
+    time [s] of the samples to fit (the file's time), else the whole approach."""
     import nanite
 
     group = nanite.load_group(path)
@@ -91,7 +92,7 @@ def nanite_E(path, index, radius, window=None):
         idnt = nanite.Indentation(data, md)
     idnt.apply_preprocessing(["compute_tip_position", "correct_force_offset",
                               "correct_tip_offset"])
-    idnt.fit_properties["model_key"] = "hertz_para"
+    idnt.fit_properties["model_key"] = model
     idnt.fit_properties["segment"] = 0
     params = idnt.get_initial_fit_parameters()
     params["R"].value = radius

@@ -51,8 +51,10 @@ import re
 
 import numpy as np
 
+from lubjax._fitting_api import checks as _checks
+
 from ._csv import JPK_EXTENSIONS, unzipped, zip_export, zip_head
-from ._trace import MAX_TRAVEL_OVER_RADIUS, TraceError, make_trace
+from ._trace import MAX_SPHERE_TRAVEL_OVER_RADIUS, TraceError, make_trace
 
 #: File name endings read through afmformats (lower case).
 AFM_EXTENSIONS = (*JPK_EXTENSIONS, ".ibw", ".h5", ".tab")
@@ -77,7 +79,8 @@ STAGE_MIN_ROWS = 8
 #: the sensor's noise σ (or the knots are as dense as STAGE_MIN_ROWS allows).
 STAGE_NOISE_FACTOR = 1.2
 #: An approach-only trace is cut where the kept stage travel reaches this fraction of the
-#: model's limit MAX_TRAVEL_OVER_RADIUS·R (the cut is in the metadata: ``approach_cut_m``).
+#: indenter's limit, MAX_TRAVEL_OVER_RADIUS·R for the paraboloid, MAX_SPHERE_TRAVEL_OVER_RADIUS·R
+#: for the sphere (the cut is in the metadata: ``approach_cut_m``).
 CAP = 0.95
 
 
@@ -303,10 +306,12 @@ def _decimate(t, d, f, lab, order, max_samples):
 
 def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
                    baseline: str = "offset", max_samples: int = MAX_SAMPLES, name: str = "curve",
-                   extra_metadata=None, drive: str = "spring"):
+                   extra_metadata=None, drive: str = "spring", indenter: str = "paraboloid"):
     """One afmformats curve as a :class:`fitting.Trace` (see the module docstring): for the
     spring drive (default), or for load control (``drive="force"``, a constant-force dwell as
-    creep: the input is the force, the response the tip's approach)."""
+    creep: the input is the force, the response the tip's approach). ``indenter``: the
+    travel limit the approach is cut to and checked against, the paraboloid's (default) or
+    the sphere's (``--indenter sphere``: to its full depth, up to 1 R)."""
     _check_options(drive, baseline, max_samples)
     a = curve_arrays(curve, name)
     r, where = _tip_radius(curve, radius, name)
@@ -338,7 +343,8 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
         ic = appr[0] + _contact_index(d[appr], f[appr] - base[appr])
     d_contact = float(d[ic])
     d_in = float(d[appr[-1]]) - d_contact
-    cap = CAP * MAX_TRAVEL_OVER_RADIUS * r / (1 + MARGIN)
+    limit = _checks.max_travel_over_radius(indenter)
+    cap = CAP * limit * r / (1 + MARGIN)
     cut = None
     if d_in > cap and order == ["approach"]:
         # Only the start of a deep approach is within the thin-film model's travel ≪ R.
@@ -375,11 +381,13 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
     what = ("the stage travel kept ({:.3g} m: the indentation, the cantilever's bending F/k "
             "and the margin before contact)" if drive == "spring" else
             "the tip's travel from contact ({:.3g} m)").format(reach)
-    if reach > MAX_TRAVEL_OVER_RADIUS * r:
+    if reach > limit * r:
+        fix = ("--indenter sphere models it to 1 R (the sphere's true profile)"
+               if indenter == "paraboloid" and reach <= MAX_SPHERE_TRAVEL_OVER_RADIUS * r else
+               "a deeper indentation is beyond every indenter the model has")
         raise TraceError(
             f"{name}: {what} is {reach / r:.3g} R with R = {r:.3g} m "
-            f"({where}); the thin-film model needs travel <= {MAX_TRAVEL_OVER_RADIUS:g} R. "
-            "A deeper indentation is beyond it (a sharper tip: a larger R is not a fix)")
+            f"({where}); the {indenter} indenter models travel <= {limit:g} R: {fix}")
     meta = {
         "drive": drive, "stiffness_N_m": repr(a["stiffness"]), "instrument_file": str(name),
         "modality": a["modality"], "segments": ",".join(order), "baseline": baseline,
@@ -399,7 +407,8 @@ def curve_to_trace(curve, *, radius=None, poisson=None, segments=("approach",),
 
 
 def read_afm(path, *, radius=None, poisson=None, segments=("approach",), baseline="offset",
-             max_samples: int = MAX_SAMPLES, curves=None, drive: str = "spring"):
+             max_samples: int = MAX_SAMPLES, curves=None, drive: str = "spring",
+             indenter: str = "paraboloid"):
     """The traces of an AFM or indenter vendor file, read through afmformats (a list: a force
     map gives one per curve), SI, ready for :func:`fit_traces` (see the module docstring).
 
@@ -415,6 +424,8 @@ def read_afm(path, *, radius=None, poisson=None, segments=("approach",), baselin
         curves: indices of the curves to keep (default all).
         drive: "spring" (the cantilever; default) or "force" (load control of a
             constant-force dwell: segments approach and dwell).
+        indenter: "paraboloid" (default: the approach cut to, and the travel refused beyond,
+            0.2 R) or "sphere" (the full depth, to 1 R; fit with the same ``indenter``).
 
     Returns:
         list[Trace]: one per curve kept (a force map gives one per curve).
@@ -442,5 +453,5 @@ def read_afm(path, *, radius=None, poisson=None, segments=("approach",), baselin
             out.append(curve_to_trace(all_curves[i], radius=radius, poisson=poisson,
                                       segments=segments, baseline=baseline,
                                       max_samples=max_samples, name=name, extra_metadata=extra,
-                                      drive=drive))
+                                      drive=drive, indenter=indenter))
     return out

@@ -174,6 +174,7 @@ def _add_model_options(p) -> None:
     _options.add_substrate_options(p.add_argument_group("substrate", textwrap.fill(
         "A layer of known thickness on a rigid base, or a viscoelastic half-space: one Prony "
         "term, E0/Einf and tau fitted.", 76)))
+    _options.add_indenter_option(p)
     p.add_argument("--compare", action="store_true",
                    help="also fit the other model and report which one the data ask for "
                    "(likelihood ratio, AIC, BIC): with --substrate layer the half-space "
@@ -230,7 +231,7 @@ def _spec_options(args, n_traces):
     layer = ((args.thickness, _options.layer_poisson(args), _options.layer_base(args))
              if args.thickness else None)
     return dict(layer=layer, viscoelastic=args.substrate == "viscoelastic",
-                fit_offset=not args.no_offset), shared
+                fit_offset=not args.no_offset, indenter=args.indenter), shared
 
 
 def _fixed_option(args, spec: ModelSpec, shared) -> dict:
@@ -402,7 +403,8 @@ def _read_all(args, read_kw):
     curve), delimited text through ``read_trace``."""
     afm_opts = dict(radius=args.radius, poisson=args.poisson, baseline=args.baseline,
                     max_samples=args.max_samples, curves=args.curve,
-                    drive=args.drive if args.drive is not None else "spring")
+                    drive=args.drive if args.drive is not None else "spring",
+                    indenter=args.indenter)
     try:
         afm_opts["segments"] = _afm.parse_segments(args.segments)
     except ValueError as exc:

@@ -68,7 +68,7 @@ def _finish(name: str, lay: FileLayout, data: np.ndarray) -> Trace:
     cols = [np.ascontiguousarray(data[:, k]) * s if s != 1.0 else np.ascontiguousarray(data[:, k])
             for k, s in enumerate(lay.scale)]
     trace = Trace(*cols, lay.radius, lay.metadata, name)
-    check_scales(trace)
+    check_scales(trace, "sphere")
     return trace
 
 

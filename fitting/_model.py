@@ -11,11 +11,10 @@ One model for every experiment: a **drive** (what the instrument prescribes) and
   ``lubjax.Load(F̄_end, F(t̄)/F_end)``.
 
 Substrates: the half-space (default), a layer of known thickness H on a rigid base
-(``ModelSpec.layer``), and either of them viscoelastic (``ModelSpec.viscoelastic``: a standard
-linear solid, ``lubjax.Viscoelastic.standard_linear_solid``, whose E0/E∞ and τ are fitted; E*
-is then the relaxed modulus E*∞).
-
-Scales taken from the data (not from the user): :mod:`fitting._scales`.
+(``ModelSpec.layer``), either of them viscoelastic (``ModelSpec.viscoelastic``: a standard
+linear solid whose E0/E∞ and τ are fitted; E* is then the relaxed modulus E*∞). Indenters: the
+paraboloid (default) or the sphere's true profile (``ModelSpec.indenter``). Scales taken from
+the data (not from the user): :mod:`fitting._scales`.
 
 With the speed d_c/t_c in eq 8e, β = E* d_c^{3/2} t_c/(6π η R^{3/2}) and z̄0 = z0/d_c for every
 drive (the creep test of ``lubjax.CreepTest`` uses the same β with its own d_c). The measured
@@ -58,7 +57,7 @@ from lubjax._fitting_api import compiler as _compiler
 from lubjax._fitting_api import sharding as _sharding
 
 from ._scales import Scales, channels, drive_unit, history, noise_level
-from ._trace import DRIVES, Trace
+from ._trace import DRIVES, Trace, check_scales
 
 FIT_SETTINGS = lubjax.Settings(rtol=3e-4, force_floor=1e-5, max_steps=5000,
                                film_error="relative")
@@ -69,10 +68,8 @@ only down to 1e-5 of its peak (a load cell's noise is ≥ 1e-3 of it); a bundled
 about 300 of the 5000 attempts. The film keeps the relative control, not relax's default
 "auto" (the force norm from β = 10⁵ on): under the force norm the model's value moves between
 neighbouring parameters by a fraction of its tolerance (its steps change), and a fit follows
-that where the data do not determine a parameter (docs/guide/fitting.md, near-dry contacts:
-on data/water_dc140.csv "auto" reports η with an error bar that misses the truth, and with η
-fixed it does not converge). The model's remaining error at the optimum is estimated and
-folded into the reported errors."""
+that where the data do not determine a parameter (docs/guide/fitting.md, near-dry contacts).
+The model's remaining error at the optimum is estimated and folded into the reported errors."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,20 +84,24 @@ class ModelSpec:
         viscoelastic: fit a standard linear solid (E0/E∞, τ) instead of an elastic solid
             (default False).
         fit_offset: fit a constant offset of the response channel (default True).
+        indenter: "paraboloid" (default: travel ≤ 0.2 R) or "sphere", the sphere's true
+            profile for deep indentation (``lubjax.Sphere(d_c/R)`` per trace).
 
     Raises:
-        ValueError: an unknown ``drive``, or a ``layer`` not (thickness, Poisson's ratio,
-            base) in range.
+        ValueError: an unknown ``drive`` or ``indenter``, or a ``layer`` not (thickness,
+            Poisson's ratio, base) in range.
     """
 
     drive: str = "travel"
     layer: tuple | None = None
     viscoelastic: bool = False
     fit_offset: bool = True
+    indenter: str = "paraboloid"
 
     def __post_init__(self):
         if self.drive not in DRIVES:
             raise ValueError(f"drive must be one of {', '.join(DRIVES)}, got {self.drive!r}")
+        _checks.check_choice("indenter", self.indenter, _checks.INDENTERS)
         if self.layer is not None:
             try:
                 h, nu, base = self.layer
@@ -182,7 +183,8 @@ class TraceData(NamedTuple):
         noise: σ, the residuals' unit [N or m].
         drive_unit: the load F_end/``force_scale_unit`` or the spring's π k/(2√(R d_c)) [Pa];
             ÷ E* gives the drive's dimensionless number.
-        disc: a layer's own discretisation (its influence matrix), or None: the solver's.
+        disc: the trace's own discretisation (a layer's influence matrix, the sphere's
+            profile for its d_c/R), or None: the solver's.
     """
 
     history: lubjax.SampledTravel
@@ -272,9 +274,11 @@ def trace_data(
     response = channels(trace, spec.drive)[1]
     R, dc, tc = scales.radius, scales.indent, scales.time_scale
     fsu = scales.force_scale(1.0)
-    disc = None if spec.layer is None else _layer_disc(
-        FIT_SETTINGS.mesh() if mesh is None else mesh, layer_substrate(spec, scales)
-    )
+    check_scales(trace, spec.indenter)
+    shape = lubjax.Sphere(dc / R) if spec.indenter == "sphere" else None
+    disc = None if spec.layer is None and shape is None else _layer_disc(
+        FIT_SETTINGS.mesh() if mesh is None else mesh,
+        None if spec.layer is None else layer_substrate(spec, scales), shape)
     sigma = max(noise_level(response), 1e-6 * scales.response_unit)
     return TraceData(
         history=hist,
@@ -293,14 +297,12 @@ def trace_data(
     )
 
 
-def _layer_disc(mesh, layer):
+def _layer_disc(mesh, layer, shape=None):
     try:
-        return lubjax.stepper.discretise(mesh, layer)
+        return lubjax.stepper.discretise(mesh, layer, shape)
     except ImportError as exc:  # lubjax/_layer.py (the layer's influence matrix) is missing
-        raise RuntimeError(
-            f"the layer substrate needs the layer's influence matrix (lubjax/_layer.py), which "
-            f"this installation lacks ({exc})"
-        ) from None
+        raise RuntimeError(f"the layer substrate needs the layer's influence matrix "
+                           f"(lubjax/_layer.py), which this installation lacks ({exc})") from None
 
 
 def make_drive(drive: str, unit, history, E_star):

@@ -3,11 +3,12 @@
 A :class:`Trace` holds time [s], the indenter's travel [m], the force [N], the sphere's radius
 [m] and the file's ``# key: value`` metadata. Every malformed trace raises :class:`TraceError`
 (a ``ValueError``) naming the file, the line (1-based) and, for cell errors, the column. Scales
-the thin-film model cannot describe (travel beyond ``MAX_TRAVEL_OVER_RADIUS`` R, |force| above
-``MAX_FORCE_N``, R outside ``RADIUS_RANGE_M``) are refused the same way, with the likely unit
-mistake (:func:`check_scales`), and so is a force negative in compression
-(:func:`check_force_sign`, once the drive is known). The readers (:mod:`fitting._csv`,
-:mod:`fitting._afm`) build their traces through :func:`make_trace`.
+the thin-film model cannot describe (travel beyond ``MAX_SPHERE_TRAVEL_OVER_RADIUS`` R, |force|
+above ``MAX_FORCE_N``, R outside ``RADIUS_RANGE_M``) are refused the same way, with the likely
+unit mistake (:func:`check_scales`); a fit with the default paraboloid refuses travel beyond
+``MAX_TRAVEL_OVER_RADIUS`` R (naming ``--indenter sphere``), and a force negative in
+compression is refused (:func:`check_force_sign`, once the drive is known). The readers
+(:mod:`fitting._csv`, :mod:`fitting._afm`) build their traces through :func:`make_trace`.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 from lubjax._fitting_api import checks as _checks
 
 MAX_TRAVEL_OVER_RADIUS = _checks.MAX_TRAVEL_OVER_RADIUS
+MAX_SPHERE_TRAVEL_OVER_RADIUS = _checks.MAX_SPHERE_TRAVEL_OVER_RADIUS
 
 COLUMNS = ("time_s", "displacement_m", "force_N")
 MIN_ROWS = 10
@@ -123,24 +125,32 @@ def check_model_keys(metadata: dict, where) -> None:
             )
 
 
-def check_scales(trace: Trace) -> None:
+def check_scales(trace: Trace, indenter: str = "paraboloid") -> None:
     """TraceError unless the trace's scales fit the thin-film model (see module docstring).
 
     The model needs travel d ≪ R (and gap z0 ≪ R): a trace whose |displacement| exceeds
-    ``MAX_TRAVEL_OVER_RADIUS`` R is refused, as is |force| > ``MAX_FORCE_N``. Both catch a
-    column in the wrong unit (mm or μm for m, mN for N) that would otherwise fit to nonsense.
+    ``MAX_TRAVEL_OVER_RADIUS`` R is refused for the paraboloid (the message names the fix,
+    ``--indenter sphere``), more than ``MAX_SPHERE_TRAVEL_OVER_RADIUS`` R for the sphere, as is
+    |force| > ``MAX_FORCE_N``. Both catch a column in the wrong unit (mm or μm for m, mN for N)
+    that would otherwise fit to nonsense. The readers check for the sphere, the widest limit;
+    a fit checks again for its own indenter (``fitting._model.trace_data``).
     """
     name = trace.name or "trace"
     r = float(trace.radius)
     travel = float(np.max(np.abs(trace.displacement))) if trace.displacement.size else 0.0
-    if travel > MAX_TRAVEL_OVER_RADIUS * r:
+    limit = _checks.max_travel_over_radius(indenter)
+    if travel > MAX_SPHERE_TRAVEL_OVER_RADIUS * r:
         raise TraceError(
             f"{name}: column displacement_m: the travel reaches {travel:.4g} m, "
             f"{travel / r:.3g} times the radius R = {r:g} m; the thin-film model needs travel "
-            f"≪ R and refuses more than {MAX_TRAVEL_OVER_RADIUS:g} R. Is displacement_m in "
+            f"≪ R and refuses more than {limit:g} R. Is displacement_m in "
             "millimetres or micrometres instead of metres? Declare it: --units displacement=um "
             "(or a '# units: displacement=um' line)"
         )
+    problem = _checks.travel_over_radius_problem(f"{name}: the travel", travel, r, indenter,
+                                                 "radius_m")
+    if problem:
+        raise TraceError(problem)
     peak = float(np.max(np.abs(trace.force))) if trace.force.size else 0.0
     if peak > MAX_FORCE_N:
         raise TraceError(
@@ -250,5 +260,5 @@ def make_trace(time, displacement, force, radius, metadata=None, name: str = "")
     check_model_keys(meta, lambda key: label)
     meta.setdefault("radius_m", repr(r))
     trace = Trace(t, d, f, r, meta, name)
-    check_scales(trace)
+    check_scales(trace, "sphere")
     return trace

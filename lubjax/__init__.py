@@ -33,6 +33,7 @@ from ._layer import layer_thickness_bar  # noqa: E402
 from ._mesh import Mesh, graded_mesh, mesh_for, uniform_mesh  # noqa: E402
 from ._result import Result  # noqa: E402
 from ._settings import Settings  # noqa: E402
+from ._shape import Paraboloid, Sphere, sneddon_sphere  # noqa: E402
 from ._solve import Plan, SolverError, force_curve, make_plan, relax  # noqa: E402
 from ._substrate import HalfSpace, Layer, Viscoelastic  # noqa: E402
 from ._sweep import SweepResult, sweep  # noqa: E402
@@ -61,6 +62,7 @@ __all__ = [
     "Load",
     "Mesh",
     "POISSON_RANGE",
+    "Paraboloid",
     "Plan",
     "RampHold",
     "RelaxationTest",
@@ -68,6 +70,7 @@ __all__ = [
     "SampledTravel",
     "Settings",
     "SolverError",
+    "Sphere",
     "Spring",
     "SweepResult",
     "Travel",
@@ -94,6 +97,7 @@ __all__ = [
     "rigid_squeeze_force",
     "rigid_squeeze_pressure",
     "si_scales",
+    "sneddon_sphere",
     "spring_stiffness_bar",
     "stepper",
     "sweep",

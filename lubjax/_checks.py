@@ -34,8 +34,15 @@ LAYER_BASES = ("bonded", "frictionless")
 FILM_ERRORS = ("auto", "relative", "force")
 """What a film's local error may be measured against (``Settings.film_error``)."""
 MAX_TRAVEL_OVER_RADIUS = 0.2
-"""The paraboloid and thin-film model need travel and gap ≪ R: inputs (SI) with d_c or z0 above
-this × R are refused."""
+"""The paraboloid (eq 8a) needs travel and gap ≪ R: SI inputs with d_c or z0 above this × R are
+refused with the paraboloid, and the message names the fix, the sphere's true profile
+(``lubjax.Sphere``, ``--indenter sphere``)."""
+MAX_SPHERE_TRAVEL_OVER_RADIUS = 1.0
+"""The sphere's own limit (``lubjax.Sphere``): travel and gap at most R. Sneddon's rigid sphere on
+the half-space has its contact on the lower hemisphere, a < R; at δ = R it reaches a = 0.83 R,
+the surface at its edge already at 56° from the plane. Deeper, the substrate would have to wrap
+toward the equator, where neither a flat half-space's elasticity nor a film thin against the
+contact radius describes it."""
 
 
 def is_traced(value) -> bool:
@@ -248,3 +255,34 @@ def check_parameter_arrays(beta: np.ndarray, z0: np.ndarray):
             raise ValueError(
                 f"{name} values must be finite and in [{lo:g}, {hi:g}], got {v[~good][:3]}"
             )
+
+
+INDENTERS = ("paraboloid", "sphere")
+"""The indenter shapes by name (``--indenter``; ``lubjax.Paraboloid``, ``lubjax.Sphere``)."""
+
+
+def max_travel_over_radius(indenter: str) -> float:
+    """The largest travel or gap, in radii, that the ``indenter`` (one of :data:`INDENTERS`)
+    models: :data:`MAX_TRAVEL_OVER_RADIUS` for the paraboloid,
+    :data:`MAX_SPHERE_TRAVEL_OVER_RADIUS` for the sphere."""
+    check_choice("indenter", indenter, INDENTERS)
+    return MAX_SPHERE_TRAVEL_OVER_RADIUS if indenter == "sphere" else MAX_TRAVEL_OVER_RADIUS
+
+
+def travel_over_radius_problem(name: str, value: float, radius: float,
+                               indenter: str = "paraboloid", radius_name: str = "--radius"):
+    """None where a travel or gap ``value`` [m] is within the ``indenter``'s limit for a sphere of
+    ``radius`` [m] (:func:`max_travel_over_radius`), else the message that says so and names
+    the fix: the sphere's true profile past the paraboloid's limit, a unit check past the
+    sphere's."""
+    limit = max_travel_over_radius(indenter)
+    if value <= limit * radius:
+        return None
+    said = (f"{name} {value:g} m is {value / radius:.3g} radii ({radius_name} {radius:g} m); "
+            f"the {indenter} indenter models at most {limit:g} R")
+    if indenter == "paraboloid" and value <= MAX_SPHERE_TRAVEL_OVER_RADIUS * radius:
+        return (f"{said} (its r²/2R profile needs travel and gap ≪ R). For deep indentation "
+                f"give --indenter sphere, the sphere's true profile (Sneddon's contact, to "
+                f"{MAX_SPHERE_TRAVEL_OVER_RADIUS:g} R)")
+    return (f"{said}, and no indenter models more than {MAX_SPHERE_TRAVEL_OVER_RADIUS:g} R. "
+            "Are the lengths in metres?")

@@ -17,6 +17,7 @@ from ._cli_options import (
     add_accuracy_options,
     add_cache_flag,
     add_debug_flag,
+    add_indenter_option,
     add_substrate_options,
     example_lines,
     positive_float,
@@ -106,6 +107,7 @@ def _add_relax_command(sub):
     si.add_argument("--speed", type=float, help="approach speed v0 [m/s]")
     si.add_argument("--indent", type=float, help="travel d_c [m]")
     si.add_argument("--gap", type=float, help="initial gap z0 [m]")
+    add_indenter_option(si)
     _add_substrate(r, dimensionless=True)
     r.add_argument(
         "--dr", type=positive_float, default=None, help="fine-zone mesh spacing (Settings.dr)"
@@ -130,6 +132,7 @@ def _add_creep_command(sub):
     c.add_argument("--hold", type=float, default=None, help="hold time after the ramp [s]")
     c.add_argument("--load-csv", help="a load history instead: CSV with time_s,force_N")
     c.add_argument("--gap", type=float, help="initial gap z0 [m]")
+    add_indenter_option(c)
     _add_substrate(c)
     _add_accuracy(c)
     return c

@@ -1,7 +1,8 @@
 """The options ``lubjax`` and ``lubjax-fit`` share: each defined once here (name, type, default,
 help), with the checks of the substrate options both need.
 
-* :func:`add_substrate_options`, :func:`add_accuracy_options`, :func:`add_cache_flag`,
+* :func:`add_substrate_options`, :func:`add_indenter_option`, :func:`add_accuracy_options`,
+  :func:`add_cache_flag`,
   :func:`add_debug_flag`: the shared option groups; :func:`check_substrate_options`,
   :func:`layer_base` and :func:`layer_poisson` turn the substrate options into a choice, with
   every mistake a :class:`~lubjax._files.UsageError` naming the option.
@@ -21,7 +22,15 @@ from __future__ import annotations
 import argparse
 import math
 
-from ._checks import FILM_ERRORS, LAYER_BASES, POISSON_RANGE, check_poisson
+from ._checks import (
+    FILM_ERRORS,
+    INDENTERS,
+    LAYER_BASES,
+    MAX_SPHERE_TRAVEL_OVER_RADIUS,
+    MAX_TRAVEL_OVER_RADIUS,
+    POISSON_RANGE,
+    check_poisson,
+)
 from ._files import UsageError
 
 #: Poisson's range as the help and messages write it.
@@ -97,6 +106,15 @@ def add_substrate_options(group) -> None:
     group.add_argument("--layer-poisson", type=float, default=None,
                        help=f"Poisson ratio of the layer in {POISSON_TEXT} (default: --poisson if "
                        f"given, else {DEFAULT_LAYER_POISSON:g})")
+
+
+def add_indenter_option(group) -> None:
+    """--indenter: the paraboloid (default) or the sphere's true profile (lubjax/_shape.py)."""
+    group.add_argument("--indenter", choices=INDENTERS, default="paraboloid",
+                       help="the indenter's profile: paraboloid r²/2R (default; travel and gap at "
+                       f"most {MAX_TRAVEL_OVER_RADIUS:g} R) or sphere, its true profile for deep "
+                       f"indentation (Sneddon's contact; at most {MAX_SPHERE_TRAVEL_OVER_RADIUS:g} "
+                       "R)")
 
 
 def add_accuracy_options(parser, defaults, max_steps: bool = True) -> None:

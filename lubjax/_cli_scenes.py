@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ._checks import MAX_TRAVEL_OVER_RADIUS, T_END_MAX, check_parameters
+from ._checks import T_END_MAX, check_parameters, travel_over_radius_problem
 from ._cli_options import (
     accuracy_settings,
     check_substrate_options,
@@ -56,6 +56,7 @@ class Scene:
         summary: ``res`` -> the lines printed after the run.
         plot: ``(res, path)`` -> the figure.
         drive: the drive (None: relax's ramp-and-hold travel).
+        indenter: the indenter's profile (None: the paraboloid).
         test: the SI test whose scales the JSON adds (None: a dimensionless run).
         start_gap_m: the starting gap [m] of a drive, for the sphere's position in the JSON.
         json_extra: ``res`` -> the command's own JSON entries.
@@ -75,6 +76,7 @@ class Scene:
     summary: Callable
     plot: Callable
     drive: object = None
+    indenter: object = None
     test: object = None
     start_gap_m: float | None = None
     json_extra: Callable = lambda res: {}
@@ -98,7 +100,7 @@ def run_scene(args, scene: Scene) -> int:
     with progress_line(scene.command) as phase:
         res = relax(scene.beta, scene.z0, scene.t_end, drive=scene.drive,
                     settings=scene.settings, profile_times=scene.profile_times,
-                    substrate=scene.substrate, progress=phase)
+                    substrate=scene.substrate, progress=phase, indenter=scene.indenter)
         if scene.second_run is not None:
             res = scene.second_run(scene, res, phase)
     out = result_json(res, scene.test, z0_m=scene.start_gap_m)
@@ -117,6 +119,9 @@ def relax_scene(args) -> Scene:
         raise UsageError("give either --beta/--z0 or SI parameters, not both")
     if not si_given and (args.beta is None or args.z0 is None):
         raise UsageError("give --beta and --z0, or the SI parameters (see lubjax relax --help)")
+    if not si_given and args.indenter == "sphere":
+        raise UsageError("--indenter sphere needs the SI parameters: the sphere's profile "
+                         "depends on d_c/R (--indent, --radius), which --beta/--z0 do not give")
     check_outputs(outputs_of(args))
     test = _si_test(args) if si_given else None
     beta, z0 = (test.beta, test.z0_bar) if test else (args.beta, args.z0)
@@ -139,7 +144,7 @@ def relax_scene(args) -> Scene:
         [t for t in (0.25, 0.5, 1.0, 2.0, t_end) if t <= t_end], substrate, record, line,
         summary=lambda res: _relax_lines(res, test),
         plot=lambda res, path: plot_relax(res, path, test, line),
-        test=test,
+        test=test, indenter=test.shape if test else None,
     )
 
 
@@ -159,6 +164,7 @@ def creep_scene(args) -> Scene:
     """``lubjax creep``: a load ramped and held, or a measured load history (--load-csv)."""
     e_star = _modulus(args)
     _require(args, ["viscosity", "radius", "gap"])
+    _check_thin_given(args, ("gap",))
     check_outputs(outputs_of(args), inputs=[args.load_csv] if args.load_csv else ())
     history = None
     if args.load_csv:
@@ -169,7 +175,8 @@ def creep_scene(args) -> Scene:
         load, ramp = float(fs[peak]), float(ts[peak] - ts[0])
         if ramp <= 0:
             raise UsageError(f"{args.load_csv}: the load must rise from its first row")
-        test = CreepTest(e_star, args.radius, args.viscosity, load, ramp, args.gap)
+        test = CreepTest(e_star, args.radius, args.viscosity, load, ramp, args.gap,
+                         args.indenter)
         history = SampledTravel((ts - ts[0]) / ramp, fs / load)
         t_end = _check_end((ts[-1] - ts[0]) / ramp, f"{args.load_csv}: the load history",
                            ramp, "the time to the peak load",
@@ -178,13 +185,14 @@ def creep_scene(args) -> Scene:
         _require(args, ["load", "ramp-time", "hold"])
         if not (math.isfinite(args.hold) and args.hold >= 0):
             raise UsageError(f"--hold must be >= 0 s, got {args.hold}")
-        test = CreepTest(e_star, args.radius, args.viscosity, args.load, args.ramp_time, args.gap)
+        test = CreepTest(e_star, args.radius, args.viscosity, args.load, args.ramp_time, args.gap,
+                         args.indenter)
         ramp = args.ramp_time
         t_end = _check_end((ramp + args.hold) / ramp,
                            f"--ramp-time + --hold = {ramp + args.hold:g} s", ramp, "--ramp-time",
                            lambda limit: f"give --hold <= {_at_most(limit - ramp)} s")
-    _check_thin("--gap", test.gap, test.radius)
-    _check_thin("the Hertz indentation under the load", test.indent, test.radius)
+    _check_thin("--gap", test.gap, test.radius, test.indenter)
+    _check_thin("the Hertz indentation under the load", test.indent, test.radius, test.indenter)
     check_parameters(test.beta, test.z0_bar)
     settings = settings_of(args)
     # d_c = the Hertz indentation at E* (the relaxed one if viscoelastic), t_c = the ramp time
@@ -195,7 +203,7 @@ def creep_scene(args) -> Scene:
         substrate, record, line,
         summary=lambda res: [creep_summary(res, test)],
         plot=lambda res, path: plot_drive(res, path, "creep", test, line),
-        drive=test.drive(history), test=test, start_gap_m=test.gap,
+        drive=test.drive(history), indenter=test.shape, test=test, start_gap_m=test.gap,
         json_extra=lambda res: {"load_N": test.load, "hertz_indentation_m": test.indent},
     )
 
@@ -277,11 +285,9 @@ def _si_test(args):
         missing.append("E-star (or --E with --poisson)")
     if missing:
         raise UsageError("SI mode needs --" + ", --".join(missing))
-    test = RelaxationTest(_modulus(args), args.radius, args.viscosity, args.speed, args.indent,
-                          args.gap)
-    for name, value in [("--indent", test.indent), ("--gap", test.gap)]:
-        _check_thin(name, value, test.radius)
-    return test
+    _check_thin_given(args, ("indent", "gap"))
+    return RelaxationTest(_modulus(args), args.radius, args.viscosity, args.speed, args.indent,
+                          args.gap, args.indenter)
 
 
 def _modulus_given(args) -> bool:
@@ -304,13 +310,24 @@ def _require(args, names):
         raise UsageError("this command needs --" + ", --".join(missing))
 
 
-def _check_thin(name, value, radius):
-    if value > MAX_TRAVEL_OVER_RADIUS * radius:
-        raise UsageError(
-            f"{name} {value:g} m is {value / radius:.3g} radii (--radius {radius:g} m); the "
-            f"thin-film model needs it ≪ R (at most {MAX_TRAVEL_OVER_RADIUS:g} R). Are the "
-            "lengths in metres?"
-        )
+def _check_thin(name, value, radius, indenter="paraboloid"):
+    problem = travel_over_radius_problem(name, value, radius, indenter)
+    if problem:
+        raise UsageError(problem)
+
+
+def _check_thin_given(args, names):
+    """:func:`_check_thin` of the options ``names`` (travels and gaps) in the options' own
+    words, before the SI test class refuses them in its own; a value the class refuses for
+    another reason (not positive, not finite) is left to it."""
+    def usable(x):
+        return x is not None and math.isfinite(x) and x > 0
+
+    if usable(args.radius):
+        for name in names:
+            value = getattr(args, name)
+            if usable(value):
+                _check_thin(f"--{name}", value, args.radius, args.indenter)
 
 
 def _check_end(t_end: float, given: str, time_scale: float | None = None, t_c: str = "",

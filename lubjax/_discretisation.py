@@ -6,9 +6,11 @@ A_i = (r̄²_{i+1/2} - r̄²_{i-1/2})/2:
 
     A_i dh̄_i/dt̄ = β g_{i+1/2} (p̄_{i+1} - p̄_i) - β g_{i-1/2} (p̄_i - p̄_{i-1}),
 
-with the face conductances g ≈ r̄ h̄³/Δr̄ (:func:`face_conductance`) and h̄ = z̄ + r̄²/2 + Ŵ p̄
-(eq 8a with w̄ = -Ŵ p̄, eq 21). The axis needs no special row: the face at r̄ = 0 carries no
-flux, which is ∂p̄/∂r̄ = 0 there (eq 22a). The outer node carries p̄ = 0 (eq 22b) at a large L̄.
+with the face conductances g ≈ r̄ h̄³/Δr̄ (:func:`face_conductance`) and h̄ = z̄ + s(r̄) + Ŵ p̄
+(eq 8a with w̄ = -Ŵ p̄, eq 21), s the indenter's rigid profile (r̄²/2 for the paper's paraboloid;
+lubjax/_shape.py), held at the nodes and the faces with the other per-mesh arrays. The axis
+needs no special row: the face at r̄ = 0 carries no flux, which is ∂p̄/∂r̄ = 0 there (eq 22a).
+The outer node carries p̄ = 0 (eq 22b) at a large L̄.
 
 Departure from the paper: the conservative form instead of the expanded form (17a) with the
 one-sided ∂p̄/∂r̄ (17c): it is second-order in space on any mesh (17c is first order), and the
@@ -26,6 +28,7 @@ import numpy as np
 
 from ._influence import force_weights, influence_matrix
 from ._mesh import Mesh
+from ._shape import Paraboloid, as_indenter
 from ._substrate import HalfSpace, as_substrate
 
 #: Names the spatial discretisation, for caches of computed runs (benchmarks/accuracy.py): the
@@ -47,6 +50,8 @@ class Discretisation(NamedTuple):
         influence: Ŵ, the influence matrix (eq 21), (N, N).
         area_influence: (A Ŵ)_ij restricted to the unknowns i, j < N-1, (N-1, N-1).
         force_weights: c, with F̄ = c·p̄ (eq 11b), (N,).
+        profile: s(r̄_i), the indenter's rigid gap profile at the nodes (units of d_c), (N,).
+        face_profile: s(r̄_{i+1/2}) at the faces, (N-1,).
     """
 
     r: jax.Array
@@ -56,24 +61,36 @@ class Discretisation(NamedTuple):
     influence: jax.Array
     area_influence: jax.Array
     force_weights: jax.Array
+    profile: jax.Array
+    face_profile: jax.Array
 
 
-def discretise(mesh: Mesh, substrate=None) -> Discretisation:
-    """All per-mesh arrays for a substrate's geometry; cached, so the influence matrix is built
-    once per (mesh, elastic substrate).
+def discretise(mesh: Mesh, substrate=None, indenter=None) -> Discretisation:
+    """All per-mesh arrays for a substrate's geometry and an indenter's shape; cached, so the
+    influence matrix is built once per (mesh, elastic substrate).
 
     Args:
         mesh: the :class:`lubjax.Mesh`.
         substrate: ``lubjax.HalfSpace()`` (None, the default), a ``Layer`` or a
             ``Viscoelastic`` (its elastic geometry).
+        indenter: ``lubjax.Paraboloid()`` (None, the default) or ``lubjax.Sphere(d_c/R)``; a
+            traced sphere (under ``jit``/``vmap``/``grad``) gives traced profiles.
 
     Returns:
         Discretisation: float64 arrays on the default device.
 
     Raises:
-        TypeError: ``substrate`` is not a substrate.
+        TypeError: ``substrate`` is not a substrate, or ``indenter`` not a shape.
     """
-    return _discretise(mesh, as_substrate(substrate).elastic)
+    disc = _discretise(mesh, as_substrate(substrate).elastic)
+    indenter = as_indenter(indenter)
+    if isinstance(indenter, Paraboloid):
+        return disc
+    r, face = mesh.r, 0.5 * (mesh.r[1:] + mesh.r[:-1])
+    profiles = (indenter.profile(r), indenter.profile(face))
+    if isinstance(profiles[0], np.ndarray):
+        profiles = tuple(jax.device_put(p) for p in profiles)
+    return disc._replace(profile=profiles[0], face_profile=profiles[1])
 
 
 @functools.lru_cache(maxsize=32)
@@ -84,14 +101,17 @@ def _discretise(mesh: Mesh, elastic) -> Discretisation:
     inner = np.concatenate([[0.0], face])
     area = 0.5 * (outer**2 - inner**2)
     w = influence_matrix(mesh) if isinstance(elastic, HalfSpace) else elastic.influence(mesh)
-    arrays = (r, area, face, np.diff(r), w, area[:-1, None] * w[:-1, :-1], force_weights(mesh))
+    shape = Paraboloid()
+    arrays = (r, area, face, np.diff(r), w, area[:-1, None] * w[:-1, :-1], force_weights(mesh),
+              shape.profile(r), shape.profile(face))
     # device_put, not jnp.asarray: outside jit, jnp.asarray compiles a copy per new shape
     # (~20 ms each, 0.15 s of a fresh relax call).
     return Discretisation(*(jax.device_put(np.asarray(a, np.float64)) for a in arrays))
 
 
 def film_thickness(disc: Discretisation, z, pressure):
-    """The film thickness h̄ = z̄ + r̄²/2 - w̄ with w̄ = -Ŵp̄ (eqs 8a, 21).
+    """The film thickness h̄ = z̄ + s(r̄) - w̄ with w̄ = -Ŵp̄ (eqs 8a, 21), s = ``disc.profile``
+    (r̄²/2 for the paraboloid).
 
     Args:
         disc: the :class:`Discretisation`.
@@ -101,7 +121,7 @@ def film_thickness(disc: Discretisation, z, pressure):
     Returns:
         h̄ at the nodes (units of d_c), shape (N,).
     """
-    return z + 0.5 * disc.r**2 + disc.influence @ pressure
+    return z + disc.profile + disc.influence @ pressure
 
 
 def displacement(disc: Discretisation, pressure):
@@ -118,14 +138,14 @@ def displacement(disc: Discretisation, pressure):
 
 
 def elastic_part(disc: Discretisation, film, z):
-    """Ŵp̄ = -w̄ at the nodes, from the film: h̄ less its rigid part z̄ + r̄²/2 (eq 21)."""
-    return film - z - 0.5 * disc.r**2
+    """Ŵp̄ = -w̄ at the nodes, from the film: h̄ less its rigid part z̄ + s(r̄) (eq 21)."""
+    return film - z - disc.profile
 
 
 def film_at_midpoints(disc: Discretisation, film, z):
-    """h̄ at the cell midpoints: the rigid part z̄ + r̄²/2 exactly, the elastic part interpolated."""
+    """h̄ at the cell midpoints: the rigid part z̄ + s(r̄) exactly, the elastic part interpolated."""
     elastic = elastic_part(disc, film, z)
-    return z + 0.5 * disc.face_r**2 + 0.5 * (elastic[:-1] + elastic[1:])
+    return z + disc.face_profile + 0.5 * (elastic[:-1] + elastic[1:])
 
 
 def extrapolate_film(h, h_prev, omega):

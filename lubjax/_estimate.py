@@ -29,11 +29,11 @@ ESTIMATE_WINDOW = 2
 SAFETY_FACTOR = 3.0
 
 
-def estimate_runs(mesh, substrate, tol, ptimes) -> list:
+def estimate_runs(mesh, substrate, indenter, tol, ptimes) -> list:
     """The estimate's two runs beside a run on ``mesh`` at ``tol``, as (discretisation,
     tolerance, profile times) each: the nested coarse mesh (every other node) at rtol and at
     8 rtol (``Tolerance.loosened``), without profiles."""
-    coarse = discretise(mesh.coarsened(), substrate)
+    coarse = discretise(mesh.coarsened(), substrate, indenter)
     loose = tol.loosened()
     return [(coarse, tol, ptimes[:0]), (coarse, loose, ptimes[:0])]
 

@@ -20,6 +20,7 @@ import math
 import numpy as np
 
 from ._checks import T_END_MAX, check_number, check_parameters
+from ._shape import Paraboloid
 
 
 @dataclasses.dataclass(frozen=True)
@@ -273,17 +274,18 @@ def settings_mesh(settings, contact_radius: float | None = None,
 NECK_CONSTANT = 0.3
 
 
-def final_contact_radius(drive, z0, dr) -> float | None:
-    """Edge of the Hertz contact the drive ends in (dimensionless), from the depth it ends at
-    (``drive.final_depth(z̄0)``): √(depth) for an indentation depth ≥ 0; 0 (refine the axis)
-    when the sphere stops short of the surface by less than 50 dr², where the pressure spot,
-    ≈ √(2 z̄) wide, would span fewer than ~10 cells; None otherwise (no contact, nothing thin
-    to resolve), and for a drive that does not know where it ends."""
+def final_contact_radius(drive, z0, dr, indenter=None) -> float | None:
+    """Edge of the dry contact the drive ends in (dimensionless), from the depth it ends at
+    (``drive.final_depth(z̄0)``): the indenter's contact radius for an indentation depth ≥ 0
+    (Hertz's √(depth) for the paraboloid, the default; Sneddon's for ``lubjax.Sphere``); 0
+    (refine the axis) when the sphere stops short of the surface by less than 50 dr², where the
+    pressure spot, ≈ √(2 z̄) wide, would span fewer than ~10 cells; None otherwise (no contact,
+    nothing thin to resolve), and for a drive that does not know where it ends."""
     depth = drive.final_depth(z0)
     if depth is None:
         return None
     if depth >= 0:
-        return math.sqrt(depth)
+        return (Paraboloid() if indenter is None else indenter).contact_radius(depth)
     return 0.0 if -depth < 50.0 * dr**2 else None
 
 
@@ -336,7 +338,7 @@ def _rim_refinement(settings, beta, t_end) -> float:
     return min(settings.rim_refinement, max(1.0, dr * cells / neck))
 
 
-def _contact_edge(settings, drive, z0) -> float | None:
+def _contact_edge(settings, drive, z0, indenter=None) -> float | None:
     """The edge of the contact a run ends in, where its mesh may be refined: the numeric
     ``Settings.contact_radius``, or with "auto" :func:`final_contact_radius` of the drive
     (None without a contact, or at the fine zone's end: there nothing can be refined, the zone
@@ -344,16 +346,16 @@ def _contact_edge(settings, drive, z0) -> float | None:
     if settings.contact_radius != "auto":
         return settings.contact_radius
     dr = mesh_parameters(settings)[0]
-    rim = final_contact_radius(drive, float(z0), dr)
+    rim = final_contact_radius(drive, float(z0), dr, indenter)
     return None if rim is None or rim >= 0.95 * settings.r_fine else rim
 
 
-def _contact_refinement(settings, drive, z0, beta, t_end) -> float | None:
+def _contact_refinement(settings, drive, z0, beta, t_end, indenter=None) -> float | None:
     """The radius ``Settings.contact_radius="auto"`` refines around for one run's film, or
     None (not "auto", no contact, or a neck no refined cell resolves)."""
     if settings.contact_radius != "auto":
         return None
-    rim = _contact_edge(settings, drive, z0)
+    rim = _contact_edge(settings, drive, z0, indenter)
     dr = mesh_parameters(settings)[0]
     if rim is None or not _neck_resolvable(float(beta), t_end, dr / settings.rim_refinement):
         return None
@@ -375,7 +377,7 @@ def _collision_refinement(settings, drive, z0, beta, rim) -> float:
     film = drive.collision_film(float(z0), beta)
     if film is None or rim <= 0:
         return 1.0
-    dr = settings.mesh_parameters()[0]
+    dr = mesh_parameters(settings)[0]
     needed = dr * math.sqrt(COLLISION_ERROR * rim / (COLLISION_TARGET * settings.rtol * film))
     return min(settings.rim_refinement, max(1.0, needed))
 
@@ -389,7 +391,7 @@ DRY_CONTACT_SLOPE = 2.0
 DRY_RIM_REFINEMENT = 3.0
 
 
-def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
+def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None) -> Mesh:
     """The mesh :func:`lubjax.relax` runs on for ``settings`` and one run: the tolerance's
     (``settings.mesh_parameters()``), refined for the contact the run ends in.
 
@@ -426,6 +428,8 @@ def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
         beta: β of the run (eq 8e), in ``BETA_RANGE``.
         z0: z̄0 = z0/d_c of the run (eq 8e), in ``Z0_RANGE``.
         t_end: its final time t̄ (units of t_c), in (0, 1e9].
+        indenter: ``lubjax.Paraboloid()`` (None, the default: Hertz's contact radius) or
+            ``lubjax.Sphere(d_c/R)`` (Sneddon's, smaller at the same depth).
 
     Returns:
         Mesh: the mesh.
@@ -442,11 +446,11 @@ def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
     check_parameters(beta, z0)
     check_number("t_end", t_end, 0.0, T_END_MAX, lo_open=True)
     beta, t_end = float(beta), float(t_end)
-    rim = _contact_edge(settings, drive, z0)
+    rim = _contact_edge(settings, drive, z0, indenter)
     if drive.inertia:  # a free sphere: a collision, not a contact the run ends in
         rim = None
         if settings.contact_radius == "auto":
-            rim = final_contact_radius(drive, float(z0), mesh_parameters(settings)[0])
+            rim = final_contact_radius(drive, float(z0), mesh_parameters(settings)[0], indenter)
         if rim is not None and not film_held_by_force(settings.film_error, beta):
             # a rebound contact reaching the fine zone's end widens it: its film is thinnest
             # near the edge there (St = 1000 at ε = 10⁻³ was 2.9 % off on the plain mesh)
@@ -454,7 +458,7 @@ def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
                 settings = dataclasses.replace(settings, r_fine=1.25 * rim)
             collision = _collision_refinement(settings, drive, z0, beta, rim)
             return settings_mesh(settings, rim, collision, collision)
-        return settings.mesh(None, _interior_refinement(settings, beta, t_end),
+        return settings_mesh(settings, None, _interior_refinement(settings, beta, t_end),
                              _rim_refinement(settings, beta, t_end))
     if rim is not None and rim > 0 and film_held_by_force(settings.film_error, beta):
         # Near dry the film inside the contact is held only through the force, so the mesh is
@@ -465,6 +469,7 @@ def mesh_for(settings, *, drive, beta, z0, t_end) -> Mesh:
         return settings_mesh(settings, rim, settings.contact_refinement,
                              min(DRY_RIM_REFINEMENT, settings.rim_refinement),
                              contact_slope=DRY_CONTACT_SLOPE * dr)
-    return settings_mesh(settings, _contact_refinement(settings, drive, z0, beta, t_end),
+    return settings_mesh(settings,
+                         _contact_refinement(settings, drive, z0, beta, t_end, indenter),
                          _interior_refinement(settings, beta, t_end),
                          _rim_refinement(settings, beta, t_end))

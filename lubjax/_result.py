@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import any_traced, check_times, concrete
+from ._checks import any_traced, check_times, concrete, is_traced
 from ._controller import DONE, stop_reason
 from ._estimate import ESTIMATED, errors_of
 from ._output import Entry, evaluate, evaluate_host
@@ -183,9 +183,10 @@ register(Result, data=tuple(f.name for f in dataclasses.fields(Result)
 
 
 def displacement_of(disc, traj):
-    """w̄ = -Ŵū at the profile times, from h̄ = z̄ + r̄²/2 - w̄ (ū ≠ p̄ on a viscoelastic
+    """w̄ = -Ŵū at the profile times, from h̄ = z̄ + s(r̄) - w̄ (ū ≠ p̄ on a viscoelastic
     substrate)."""
-    return traj.profile_gaps[:, None] + 0.5 * np.asarray(disc.r) ** 2 - traj.profile_films
+    profile = disc.profile if is_traced(disc.profile) else np.asarray(disc.profile)
+    return traj.profile_gaps[:, None] + profile - traj.profile_films
 
 
 def result_of(trajs, disc, beta, z0, t_end, ptimes, max_steps, compile_s, run_s) -> Result:

@@ -28,6 +28,7 @@ from ._output import evaluate
 from ._result import Result, result_of, traced_result
 from ._rollout import rollout
 from ._settings import Settings
+from ._shape import Paraboloid, as_indenter
 from ._substrate import HalfSpace, as_substrate
 from ._threads import single_threaded_blas
 
@@ -50,6 +51,7 @@ class Plan(NamedTuple):
         t: output times t̄ of :func:`force_curve` (a 1-D float64 array).
         mesh: the :class:`lubjax.Mesh`.
         substrate: ``lubjax.HalfSpace()`` (default), a ``Layer`` or a ``Viscoelastic``.
+        indenter: ``lubjax.Paraboloid()`` (default) or ``lubjax.Sphere(d_c/R)``.
     """
 
     disc: Discretisation
@@ -59,6 +61,7 @@ class Plan(NamedTuple):
     t: np.ndarray
     mesh: Mesh
     substrate: object = HalfSpace()
+    indenter: object = Paraboloid()
 
 
 def _drive_of(history, drive):
@@ -78,6 +81,7 @@ def make_plan(
     substrate=None,
     settings: Settings | None = None,
     times=None,
+    indenter=None,
 ) -> Plan:
     """Mesh and influence matrix (cached per mesh), tolerance, drive and output times.
 
@@ -92,6 +96,7 @@ def make_plan(
         settings: tolerance and mesh (default ``Settings()``).
         times: where :func:`force_curve` reports F̄ (t̄, units of t_c; default 501 equally
             spaced times from the drive's start to ``t_end``).
+        indenter: ``Paraboloid()`` (default) or ``Sphere(d_c/R)`` (lubjax/_shape.py).
 
     Returns:
         Plan: the fixed (not differentiated) half of :func:`force_curve`'s inputs.
@@ -119,10 +124,9 @@ def make_plan(
         times = np.linspace(t_start, t_end, 501)
     times = check_times(times, "times", t_start, t_end)
     mesh = settings.mesh()
-    substrate = as_substrate(substrate)
-    return Plan(
-        discretise(mesh, substrate), settings.tolerance(), drive, t_end, times, mesh, substrate
-    )
+    substrate, indenter = as_substrate(substrate), as_indenter(indenter)
+    return Plan(discretise(mesh, substrate, indenter), settings.tolerance(), drive, t_end, times,
+                mesh, substrate, indenter)
 
 
 def force_curve(plan: Plan, beta, z0, times=None):
@@ -214,6 +218,7 @@ def relax(
     check: str = "raise",
     progress=None,
     mesh: Mesh | None = None,
+    indenter=None,
 ) -> Result:
     """Simulate a relaxation test (paper eqs 8, 11b) in dimensionless form, error-controlled.
 
@@ -248,6 +253,9 @@ def relax(
             ("compiling the solver", "running the solver", "estimating the error"): the
             command line's progress line shows it.
         mesh: the mesh to run on (default: :func:`lubjax.mesh_for`, the one the run needs).
+        indenter: ``Paraboloid()`` (default, eq 8a) or ``Sphere(d_c/R)``, the sphere's true
+            profile for deep indentation (lubjax/_shape.py); its ε = d_c/R is a leaf that
+            ``jit``, ``vmap`` and ``grad`` see.
 
     Returns:
         Result: F̄, the gap and min h̄ at every accepted step, the profiles at
@@ -276,25 +284,27 @@ def relax(
     check_choice("check", check, ("raise", "warn", "flag"))
     drive = _drive_of(history, drive)
     settings = Settings() if settings is None else settings
-    substrate = as_substrate(substrate)
-    known = concrete((beta, z0, t_end, drive, substrate))
+    substrate, indenter = as_substrate(substrate), as_indenter(indenter)
+    known = concrete((beta, z0, t_end, drive, substrate, indenter))
     if known is None:
-        return _relax_traced(beta, z0, t_end, drive, substrate, settings, profile_times, mesh)
-    beta_v, z0_v, t_end_v, drive_v, substrate_v = known
+        return _relax_traced(beta, z0, t_end, drive, substrate, settings, profile_times, mesh,
+                             indenter)
+    beta_v, z0_v, t_end_v, drive_v, substrate_v, indenter_v = known
     check_parameters(beta_v, z0_v)
     t_start = float(drive_v.t_start)
     t_end_v = check_t_end(t_end_v, t_start)
     ptimes = check_times(profile_times, "profile_times", t_start, t_end_v)
     if mesh is None:
-        mesh = mesh_for(settings, drive=drive_v, beta=beta_v, z0=z0_v, t_end=t_end_v)
-    disc = discretise(mesh, substrate_v)
+        mesh = mesh_for(settings, drive=drive_v, beta=beta_v, z0=z0_v, t_end=t_end_v,
+                        indenter=indenter_v)
+    disc = discretise(mesh, substrate_v, indenter_v)
     tol = settings.tolerance()
     runs = [(disc, tol, ptimes)]
     if settings.error_estimate:
-        runs += estimate_runs(mesh, substrate_v, tol, ptimes)
+        runs += estimate_runs(mesh, substrate_v, indenter_v, tol, ptimes)
     # With a derivative to take, the run itself goes through jit with its inputs' derivatives
     # attached; the error estimate's runs are not differentiated.
-    differentiated = any_traced((beta, z0, drive, substrate))
+    differentiated = any_traced((beta, z0, drive, substrate, indenter))
     report = progress if progress is not None else (lambda phase: None)
     report("compiling the solver")
     compiled, compile_s = _compiled_rollouts(runs[differentiated:], drive_v, substrate_v)
@@ -307,8 +317,8 @@ def relax(
             for fn, (d, t, pt) in zip(compiled, runs[differentiated:])
         ]
         if differentiated:
-            trajs.insert(0, _differentiable_rollout(disc, beta, z0, drive, substrate, t_end_v,
-                                                    ptimes, tol))
+            trajs.insert(0, _differentiable_rollout(discretise(mesh, substrate_v, indenter), beta,
+                                                    z0, history, substrate, t_end_v, ptimes, tol))
     run_s = time.perf_counter() - start
     if settings.error_estimate:
         report("estimating the error")
@@ -336,14 +346,15 @@ def relax(
 _differentiable_rollout = jax.jit(_forward_rollout)
 
 
-def _relax_traced(beta, z0, t_end, drive, substrate, settings, profile_times, mesh) -> Result:
+def _relax_traced(beta, z0, t_end, drive, substrate, settings, profile_times, mesh,
+                  indenter) -> Result:
     """:func:`relax` under ``jit`` or ``vmap``: one run on ``mesh`` (or the shared mesh), its
     entries as the loop left them, its flags traced."""
     times = np.atleast_1d(np.asarray(profile_times, np.float64))
     if times.ndim != 1 or not np.all(np.isfinite(times)):
         raise ValueError(f"profile_times must be a 1-D sequence of finite numbers, got {times}")
     mesh = settings.mesh() if mesh is None else mesh
-    disc = discretise(mesh, substrate)
+    disc = discretise(mesh, substrate, indenter)
     traj = _forward_rollout(disc, beta, z0, drive, substrate, t_end, times,
                             settings.tolerance())
     return traced_result(traj, disc, beta, z0, t_end, times)

@@ -5,7 +5,13 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from ._checks import check_poisson, check_quantity
+from ._checks import (
+    INDENTERS,
+    check_choice,
+    check_poisson,
+    check_quantity,
+    travel_over_radius_problem,
+)
 
 
 def _check_fields(obj, fields) -> None:
@@ -145,10 +151,31 @@ def reduced_radius(R1: float, R2: float = math.inf) -> float:
 
 
 class _Scene:
-    """What every SI scene derives from :func:`si_scales` (its own ``_si_scales()``)."""
+    """What every SI scene derives from :func:`si_scales` (its own ``_si_scales()``), and the
+    indenter's shape its ``indenter`` names."""
 
     def _si_scales(self) -> dict:
         raise NotImplementedError
+
+    def _check_indenter(self, **lengths) -> None:
+        """The ``indenter`` a choice, and each of ``lengths`` (name: metres, a travel or gap)
+        within its limit (``lubjax._checks.travel_over_radius_problem``)."""
+        check_choice("indenter", self.indenter, INDENTERS)
+        for name, value in lengths.items():
+            problem = travel_over_radius_problem(name, value, self.radius, self.indenter,
+                                                 "radius")
+            if problem:
+                raise ValueError(problem)
+
+    @property
+    def shape(self):
+        """The shape :func:`lubjax.relax` takes (``indenter=``): ``Paraboloid()``, or for
+        ``indenter="sphere"`` ``Sphere(d_c/R)`` with this scene's depth scale d_c."""
+        from ._shape import Paraboloid, Sphere
+
+        if self.indenter == "sphere":
+            return Sphere(self.scales["gap_m"] / self.radius)
+        return Paraboloid()
 
     @property
     def scales(self) -> dict:
@@ -187,6 +214,13 @@ class RelaxationTest(_Scene):
         speed: approach speed v0 [m/s].
         indent: travel d_c [m].
         gap: initial gap z0 [m].
+        indenter: "paraboloid" (default, eq 8a: d_c, z0 ≪ R) or "sphere" (its true profile,
+            for deep indentation; ``shape``).
+
+    Raises:
+        ValueError: a value not positive and finite, an unknown ``indenter``, or ``indent``
+            or ``gap`` beyond the indenter's limit (0.2 R for the paraboloid, the message
+            naming the sphere; R for the sphere).
     """
 
     E_star: float
@@ -195,6 +229,7 @@ class RelaxationTest(_Scene):
     speed: float
     indent: float
     gap: float
+    indenter: str = "paraboloid"
 
     def __post_init__(self):
         _check_fields(
@@ -208,6 +243,7 @@ class RelaxationTest(_Scene):
                 ("gap", "m"),
             ],
         )
+        self._check_indenter(indent=self.indent, gap=self.gap)
 
     @classmethod
     def from_E(cls, E: float, poisson_ratio: float, **kw) -> RelaxationTest:
@@ -267,6 +303,8 @@ class CreepTest(_Scene):
         load: F, the held load [N].
         ramp_time: the load's ramp time t_c [s].
         gap: z0, the initial gap [m].
+        indenter: "paraboloid" (default) or "sphere" (``shape``; d_c stays Hertz's δ∞, a
+            scale: the sphere's own indentation under the load is deeper).
 
     Scales (docs/model.md, "Drives"): d_c = δ∞, Hertz's indentation under the load, and
     t_c = ``ramp_time``, so that the dimensionless load plateau is F̄ = 2π/3 and the gap tends to
@@ -280,6 +318,7 @@ class CreepTest(_Scene):
     load: float
     ramp_time: float
     gap: float
+    indenter: str = "paraboloid"
 
     def __post_init__(self):
         _check_fields(
@@ -293,6 +332,7 @@ class CreepTest(_Scene):
                 ("gap", "m"),
             ],
         )
+        self._check_indenter(gap=self.gap)
 
     @property
     def indent(self) -> float:

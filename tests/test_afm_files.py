@@ -212,8 +212,14 @@ def test_creep_compliance_as_load_control(data_dir):
 
 def test_deep_dwell_beyond_the_thin_film_model_is_refused(data_dir):
     path = _vendor(data_dir, "fmt-jpk-sr_cell1-0008.jpk-force")
-    with pytest.raises(TraceError, match=r"needs travel <= 0.2 R"):
+    with pytest.raises(TraceError, match=r"the paraboloid indenter models travel <= 0.2 R: "
+                       r"--indenter sphere models it to 1 R"):
         _afm.read_afm(path, radius=20e-6, segments=("approach", "dwell"))
+    # the sphere's true profile reads it to its full depth; past 1 R nothing does
+    (deep,) = _afm.read_afm(path, radius=20e-6, segments=("approach", "dwell"), indenter="sphere")
+    assert np.max(np.abs(deep.displacement)) <= deep.radius
+    with pytest.raises(TraceError, match="beyond every indenter"):
+        _afm.read_afm(path, radius=10e-6, segments=("approach", "dwell"), indenter="sphere")
 
 
 def test_bad_input_is_named(data_dir, monkeypatch):

@@ -141,7 +141,7 @@ RELAX_USAGE = [
     (["relax"] + SI[:2] + ["--viscosity", "-1e2"] + SI[4:], "viscosity must be finite and > 0"),
     (["relax"] + SI[:-2] + ["--gap", "nan"], "gap must be finite and > 0"),
     (["relax"] + SI[:-4] + ["--indent", "0.14", "--gap", "140e-6"], "--indent 0.14 m is 70"),
-    (["relax"] + SI[:-2] + ["--gap", "1e-2"], "thin-film model needs it ≪ R"),
+    (["relax"] + SI[:-2] + ["--gap", "1e-2"], "paraboloid indenter models at most 0.2 R"),
     (["relax", "--E", "3e6", "--poisson", "0.6"] + SI[2:], "poisson_ratio must be in (-1, 0.5]"),
     (["relax", "--E", "3e6"] + SI[2:], "SI mode needs --E-star (or --E with --poisson)"),
     (DIM + ["--poisson", "0.3"], "give either --beta/--z0 or SI parameters, not both"),

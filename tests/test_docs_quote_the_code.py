@@ -56,8 +56,10 @@ QUOTES = [
      r"not below the (?P<y>\S+ \S+) of\s+tribometer traces",
      (_checks.AFM_E_STAR_RANGE_PA[0], _checks.E_STAR_RANGE_PA[0])),
     # what a trace file is refused for (fitting/_trace.py, fitting/_csv.py)
-    ("data/README.md", r"max \\\|`displacement_m`\\\| > (?P<x>[0-9.]+) R \|",
+    ("data/README.md", r"max \\\|`displacement_m`\\\| > (?P<x>[0-9.]+) R \(a fit",
      _trace.MAX_TRAVEL_OVER_RADIUS),
+    ("data/README.md", r"with `--indenter sphere`, (?P<x>[0-9.]+) R\)",
+     _trace.MAX_SPHERE_TRAVEL_OVER_RADIUS),
     ("data/README.md", r"max \\\|`force_N`\\\| > (?P<x>[0-9.]+ N) \|", _trace.MAX_FORCE_N),
     ("data/README.md", r"`radius_m` outside " + _RANGE + " m", _trace.RADIUS_RANGE_M),
     ("data/README.md", r"^- a file over (?P<x>[0-9.]+ GiB);", _csv.MAX_FILE_BYTES),

@@ -80,7 +80,7 @@ def test_bounce_cli_reports_restitution(tmp_path):
         (["creep", *MATERIAL, "--load", "0.03", "--ramp-time", "1", "--hold", "-1",
           "--gap", "1e-4"], "--hold must be >= 0"),
         (["creep", *MATERIAL, "--load", "0.03", "--ramp-time", "1", "--hold", "5",
-          "--gap", "0.01"], "thin-film model needs it"),
+          "--gap", "0.01"], "paraboloid indenter models at most 0.2 R"),
         (["bounce", *MATERIAL, "--mass", "1e-3", "--density", "7800", "--speed", "0.1",
           "--gap", "1e-4"], "either --mass or --density"),
         (["bounce", *MATERIAL, "--mass", "1e-3", "--speed", "0.1", "--gap", "1e-4",

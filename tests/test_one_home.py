@@ -269,9 +269,10 @@ def test_fitting_modules_import_only_the_ones_below_them():
 
 
 def test_the_film_and_the_drives_are_written_once():
-    """h̄ = z̄ + r̄²/2 + Ŵp̄ (eq 21) and its inverse live in lubjax/_discretisation.py
-    (film_thickness, elastic_part); the drives a fit knows in fitting/_trace.py (DRIVES)."""
-    rigid = re.compile(r"0\.5 \* disc\.r\s*\*\*\s*2")
+    """h̄ = z̄ + s(r̄) + Ŵp̄ (eq 21) and its inverse live in lubjax/_discretisation.py
+    (film_thickness, elastic_part; s the indenter's profile, disc.profile, lubjax/_shape.py);
+    the drives a fit knows in fitting/_trace.py (DRIVES)."""
+    rigid = re.compile(r"0\.5 \* disc\.r\s*\*\*\s*2|z \+ disc\.profile|- z - disc\.profile")
     written = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "lubjax").glob("*.py")
                      if rigid.search(p.read_text(encoding="utf-8")))
     assert written == ["lubjax/_discretisation.py"]
