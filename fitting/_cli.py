@@ -36,7 +36,7 @@ from ._fit import fit_traces
 from ._model import FIT_SETTINGS, ModelSpec
 from ._optimisers import METHODS
 from ._report import fit_report, result_to_dict, summary_line, write_table
-from ._scales import drive_of
+from ._scales import common_drive
 from ._start import scales_and_starts
 from ._trace import DRIVES
 
@@ -428,11 +428,10 @@ def _read_all(args, read_kw):
 
 
 def _common_drive(traces, drive):
-    drives = {drive_of(t, drive) for t in traces}
-    if len(drives) > 1:
-        raise UsageError(f"the traces have different drives ({', '.join(sorted(drives))}): fit "
-                         "them in separate calls")
-    return drives.pop()
+    try:
+        return common_drive(traces, drive)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def main(argv=None) -> int:

@@ -156,12 +156,7 @@ def _check_args(traces, method, max_iter, tol, starts, scales):
 def _spec_for(traces, spec, drive, substrate_kw):
     if spec is not None:
         return spec
-    drives = {_scales.drive_of(tr, drive) for tr in traces}
-    if len(drives) > 1:
-        raise ValueError(
-            f"traces fitted together must have one drive, got {', '.join(sorted(drives))}"
-        )
-    return ModelSpec(drive=drives.pop(), **substrate_kw)
+    return ModelSpec(drive=_scales.common_drive(traces, drive), **substrate_kw)
 
 
 def fit_traces(

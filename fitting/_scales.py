@@ -91,6 +91,15 @@ def drive_of(trace: Trace, drive: str | None = None) -> str:
     return drive
 
 
+def common_drive(traces, drive: str | None = None) -> str:
+    """The one drive of traces fitted together (:func:`drive_of` each); ValueError if they
+    differ."""
+    drives = {drive_of(t, drive) for t in traces}
+    if len(drives) > 1:
+        raise ValueError(f"traces fitted together must have one drive, got "
+                         f"{', '.join(sorted(drives))}: fit them in separate calls")
+    return drives.pop()
+
 
 def channels(trace: Trace, drive: str):
     """(input, response, input column name, response column name)."""

@@ -13,14 +13,17 @@ os.environ["LUBJAX_CACHE"] = "0"
 def pytest_addoption(parser):
     parser.addoption(
         "--doc-commands", action="store_true",
-        help="also run every documented lubjax / lubjax-fit command (tests/test_doc_commands.py, "
-             "about 4 minutes on two cores); CI runs them after the suite")
+        help="also run every documented lubjax / lubjax-fit command and every example of the "
+             "docs and docstrings (tests/test_doc_commands.py, test_docs_examples.py, "
+             "test_docstring_examples.py; about 5 minutes on two cores); CI runs them after the "
+             "suite")
 
 
 def pytest_collection_modifyitems(config, items):
     if config.getoption("--doc-commands"):
         return
-    skip = pytest.mark.skip(reason="a documented command: run with --doc-commands (CI does)")
+    skip = pytest.mark.skip(reason="a documented command or example: run with --doc-commands "
+                                   "(CI does)")
     for item in items:
         if "doc_command" in item.keywords:
             item.add_marker(skip)

@@ -58,7 +58,8 @@ def test_the_main_pages_have_examples():
         assert python_blocks((ROOT / name).read_text(encoding="utf-8")), name
 
 
-@pytest.mark.slow  # runs what a reader would (5-25 s a page): the full suite only
+@pytest.mark.slow  # runs what a reader would (5-25 s a page): with --doc-commands, as CI does
+@pytest.mark.doc_command
 @pytest.mark.parametrize(
     "page",
     [p for p in PAGES if python_blocks(p.read_text(encoding="utf-8"))],

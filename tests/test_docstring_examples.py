@@ -66,7 +66,8 @@ def test_docstring_has_the_sections(name):
         assert re.search(rf"^{heading}$", doc, re.MULTILINE), f"{name}: no {heading!r}"
 
 
-@pytest.mark.slow  # runs each example as a reader would (up to 16 s each): the full suite only
+@pytest.mark.slow  # runs each example as a reader would (up to 16 s each): with --doc-commands
+@pytest.mark.doc_command
 @pytest.mark.parametrize("name", ENTRY_POINTS)
 def test_docstring_example_runs(name, monkeypatch):
     monkeypatch.chdir(ROOT)

@@ -295,3 +295,19 @@ def test_relax_and_the_fits_share_richardson_and_the_observed_orders():
     assert lubjax.Settings(rtol=1e-4).tolerance().loosened().rtol == pytest.approx(
         _estimate.LOOSENING * 1e-4, rel=1e-15)
     assert _estimate.richardson(3.0, 2.0, 2.0) == 1.0
+
+
+def test_one_drive_per_fit_is_checked_in_one_place():
+    """fit_traces and lubjax-fit refuse traces of different drives with the same words."""
+    import fitting
+    from fitting import _cli, _scales
+
+    t = np.linspace(0.0, 1.0, 20)
+    traces = [fitting.make_trace(t, 1e-5 * t, 1e-3 * t, 2e-3, {"drive": d}, d)
+              for d in ("travel", "force")]
+    words = "one drive, got force, travel: fit them in separate calls"
+    with pytest.raises(ValueError, match=words):
+        _scales.common_drive(traces)
+    with pytest.raises(_cli.UsageError, match=words):
+        _cli._common_drive(traces, None)
+    assert _scales.common_drive(traces, "travel") == "travel"
