@@ -191,7 +191,6 @@ def creep_scene(args) -> Scene:
         t_end = _check_end((ramp + args.hold) / ramp,
                            f"--ramp-time + --hold = {ramp + args.hold:g} s", ramp, "--ramp-time",
                            lambda limit: f"give --hold <= {_at_most(limit - ramp)} s")
-    _check_thin("--gap", test.gap, test.radius, test.indenter)
     _check_thin("the Hertz indentation under the load", test.indent, test.radius, test.indenter)
     check_parameters(test.beta, test.z0_bar)
     settings = settings_of(args)

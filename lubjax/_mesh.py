@@ -365,7 +365,8 @@ def _contact_refinement(settings, drive, z0, beta, t_end, indenter=None) -> floa
 #: A collision's thinnest film, h̄_c (:meth:`lubjax.FreeSphere.collision_film`), lies inside the
 #: contact of its rebound depth, radius ā, and its spatial error is
 #: |Δh̄_c|/h̄_c ≈ COLLISION_ERROR ā Δr̄_c²/h̄_c for an interior spacing Δr̄_c (measured against
-#: runs converged in Δr̄_c: 5.8e-4·... see benchmarks/drives.py; the larger of ε = 10⁻³ and 10⁻⁵).
+#: runs converged in Δr̄_c, benchmarks/drives.py --collision: 4.8 at ε = 10⁻³, St = 50 and 7.1 at
+#: ε = 10⁻⁵, St = 20; the larger is taken).
 COLLISION_ERROR = 7.0
 #: ... held to COLLISION_TARGET × rtol (1 % at the default rtol).
 COLLISION_TARGET = 100.0
@@ -446,20 +447,20 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None) -> Mesh:
     check_parameters(beta, z0)
     check_number("t_end", t_end, 0.0, T_END_MAX, lo_open=True)
     beta, t_end = float(beta), float(t_end)
-    rim = _contact_edge(settings, drive, z0, indenter)
     if drive.inertia:  # a free sphere: a collision, not a contact the run ends in
         rim = None
         if settings.contact_radius == "auto":
             rim = final_contact_radius(drive, float(z0), mesh_parameters(settings)[0], indenter)
         if rim is not None and not film_held_by_force(settings.film_error, beta):
             # a rebound contact reaching the fine zone's end widens it: its film is thinnest
-            # near the edge there (St = 1000 at ε = 10⁻³ was 2.9 % off on the plain mesh)
+            # near the edge there (St = 1000 at ε = 10⁻³: 2.9 % off on the unwidened mesh)
             if rim >= 0.95 * settings.r_fine:
                 settings = dataclasses.replace(settings, r_fine=1.25 * rim)
             collision = _collision_refinement(settings, drive, z0, beta, rim)
             return settings_mesh(settings, rim, collision, collision)
         return settings_mesh(settings, None, _interior_refinement(settings, beta, t_end),
                              _rim_refinement(settings, beta, t_end))
+    rim = _contact_edge(settings, drive, z0, indenter)
     if rim is not None and rim > 0 and film_held_by_force(settings.film_error, beta):
         # Near dry the film inside the contact is held only through the force, so the mesh is
         # refined for the force of a contact growing from the axis, not for the film's neck and
