@@ -197,7 +197,7 @@ def map_cell(name, beta, value, mode, t_end, ref_budget):
     row.update(accepted=res.accepted, rejected=res.rejected, t_reached=float(res.t[-1]),
                run_s=res.run_s, compile_s=res.compile_s, h_min=float(np.min(res.film_min)),
                message="; ".join(res.problems())[:300])
-    if not res.finite or np.max(np.abs(res.force)) > 1e6:
+    if not np.all(np.isfinite(res.force)) or np.max(np.abs(res.force)) > 1e6:
         return dict(row, category="diverged")
     if not res.finished:
         return dict(row, category="stalled")

@@ -51,8 +51,10 @@ class Result:
         displacement: w̄ at ``profile_times``, same shape (units of d_c; ≤ 0 into the
             substrate).
         film: h̄ = z̄ + r̄²/2 - w̄ at ``profile_times`` (eq 8), same shape (units of d_c).
-        finite: no NaN or inf anywhere.
-        film_positive: h̄ > 0 at every accepted step.
+            Profile times the run did not reach are NaN.
+        film_positive: h̄ > 0 in ``film``. Every accepted step already has a finite state and a
+            positive film (the controller rejects any other); between steps the profiles are
+            the step's polynomial interpolant, which can dip below its nodes' values.
         finished: ``t_end`` reached (not stopped by the step budget or a collapsing step).
         stop_reason: why the run stopped, in words (:func:`lubjax.stepper.stop_reason`).
         force_error: estimated error of ``force`` at ``t`` (NaN if ``Settings.error_estimate``
@@ -87,7 +89,6 @@ class Result:
     pressure: np.ndarray
     displacement: np.ndarray
     film: np.ndarray
-    finite: bool
     film_positive: bool
     finished: bool
     stop_reason: str
@@ -103,8 +104,8 @@ class Result:
 
     @property
     def ok(self) -> bool:
-        """Whether the run is sound: ``finite``, ``film_positive`` and ``finished``."""
-        return self.finite and self.film_positive and self.finished
+        """Whether the run is sound: ``finished`` and ``film_positive``."""
+        return self.finished and self.film_positive
 
     def at(self, times, field: str = "force") -> np.ndarray:
         """A per-step series at any times, by the stepper's interpolant.
@@ -135,16 +136,14 @@ class Result:
         """What is wrong with the run, in words (empty when :attr:`ok`).
 
         Returns:
-            list[str]: one sentence per problem, NaN or inf, a negative film (where and how
-            thin), a run that stopped before ``t_end`` (where and why).
+            list[str]: one sentence per problem: a run that stopped before ``t_end`` (where and
+            why), a negative film in a profile (where and how thin).
         """
         out = []
-        if not self.finite:
-            out.append("the solution contains NaN or inf")
         if not self.film_positive:
-            i = int(np.nanargmin(self.film_min))
-            h, t = self.film_min[i], self.t[i]
-            out.append(f"the film went negative (h̄_min = {h:.3g} at t̄ = {t:.4g})")
+            k, i = np.unravel_index(int(np.nanargmin(self.film)), self.film.shape)
+            out.append(f"the film profile at t̄ = {self.profile_times[k]:.4g} goes negative "
+                       f"(h̄ = {self.film[k, i]:.3g} at r̄ = {self.r[i]:.4g})")
         if not self.finished:
             out.append(f"the run stopped at t̄ = {self.t[-1]:.4g} < t_end: {self.stop_reason}")
         return out
@@ -182,11 +181,21 @@ register(Result, data=tuple(f.name for f in dataclasses.fields(Result)
                            if f.name != "stop_reason"), static=("stop_reason",))
 
 
-def displacement_of(disc, traj):
+def displacement_of(disc, traj, film):
     """w̄ = -Ŵū at the profile times, from h̄ = z̄ + s(r̄) - w̄ (ū ≠ p̄ on a viscoelastic
     substrate)."""
     profile = disc.profile if is_traced(disc.profile) else np.asarray(disc.profile)
-    return traj.profile_gaps[:, None] + profile - traj.profile_films
+    return traj.profile_gaps[:, None] + profile - film
+
+
+def unreached_nan(reached, pressure, film, traced):
+    """The profiles, NaN at the profile times the run did not reach (the saver leaves the
+    initial state there)."""
+    where = jnp.where if traced else np.where
+    if not traced:
+        pressure, film = np.asarray(pressure), np.asarray(film)
+    mask = reached[:, None]
+    return where(mask, pressure, np.nan), where(mask, film, np.nan)
 
 
 def result_of(trajs, disc, beta, z0, t_end, ptimes, max_steps, compile_s, run_s) -> Result:
@@ -202,6 +211,9 @@ def result_of(trajs, disc, beta, z0, t_end, ptimes, max_steps, compile_s, run_s)
         series = values
     errors = errors_of(values, trajs)
     status = int(primal.status)
+    reached = (np.asarray(ptimes) <= float(np.max(values["t"]))) | (status == DONE)
+    pressure, film = unreached_nan(reached, traj.profiles, traj.profile_films, traced)
+    gaps = traj if traced else primal
     return Result(
         beta=float(beta),
         z0=float(z0),
@@ -209,12 +221,10 @@ def result_of(trajs, disc, beta, z0, t_end, ptimes, max_steps, compile_s, run_s)
         **series,
         r=np.asarray(disc.r),
         profile_times=ptimes,
-        pressure=traj.profiles if traced else np.asarray(traj.profiles),
-        displacement=displacement_of(disc, traj if traced else primal),
-        film=traj.profile_films if traced else np.asarray(traj.profile_films),
-        finite=bool(np.all(np.isfinite(values["force"]))
-                    and np.all(np.isfinite(primal.profiles))),
-        film_positive=bool(np.all(values["film_min"] > 0)),
+        pressure=pressure,
+        displacement=displacement_of(disc, gaps, film),
+        film=film,
+        film_positive=bool(not np.any(np.asarray(concrete(film)) <= 0)),
         finished=status == DONE,
         stop_reason=stop_reason(status, max_steps),
         **{f"{f}_error": errors[f] for f in ESTIMATED},
@@ -231,14 +241,14 @@ def traced_result(traj, disc, beta, z0, t_end, times) -> Result:
     them, its flags traced, no error estimate."""
     steps = traj.steps
     series = {k: getattr(steps, k) for k in SERIES}
-    kept = steps.accepted & jnp.isfinite(steps.t)
     nan = jnp.full_like(steps.force, jnp.nan)
+    last = jnp.max(jnp.where(jnp.isfinite(steps.t), steps.t, -jnp.inf))
+    reached = (jnp.asarray(times) <= last) | (traj.status == DONE)
+    pressure, film = unreached_nan(reached, traj.profiles, traj.profile_films, True)
     return Result(
         beta=beta, z0=z0, t_end=t_end, **series, r=np.asarray(disc.r), profile_times=times,
-        pressure=traj.profiles, displacement=displacement_of(disc, traj), film=traj.profile_films,
-        finite=(jnp.all(jnp.isfinite(jnp.where(kept, steps.force, 0.0)))
-                & jnp.all(jnp.isfinite(traj.profiles))),
-        film_positive=jnp.all(jnp.where(kept, steps.film_min > 0, True)),
+        pressure=pressure, displacement=displacement_of(disc, traj, film), film=film,
+        film_positive=~jnp.any(film <= 0),
         finished=traj.status == DONE, stop_reason="",
         **{f"{f}_error": nan for f in ESTIMATED},
         accepted=traj.accepted, rejected=traj.rejected, compile_s=0.0, run_s=0.0, steps=steps,

@@ -1,5 +1,6 @@
 """Inputs, outputs, checks, units and the differentiable / vmappable core."""
 
+import dataclasses
 import json
 import math
 import subprocess
@@ -199,3 +200,35 @@ def test_cli_bad_input_is_a_clear_error():
     proc = subprocess.run(cmd, capture_output=True, text=True)
     assert proc.returncode != 0
     assert "E_star" in proc.stderr
+
+
+def test_a_stopped_run_says_so_and_leaves_unreached_profiles_nan():
+    # A budget too small for t̄ = 3: the run stops early, its flags and words say so, and a
+    # profile time past the stop is NaN, not the initial state the saver started from.
+    res = lubjax.relax(100.0, 0.5, 3.0, profile_times=[0.01, 2.5], check="flag",
+                       settings=lubjax.Settings(max_steps=250, error_estimate=False))
+    assert not res.finished and not res.ok
+    assert res.t[-1] < 2.5
+    assert np.all(np.isfinite(res.film[0])) and np.all(np.isnan(res.film[1]))
+    assert np.all(np.isnan(res.pressure[1])) and np.all(np.isnan(res.displacement[1]))
+    assert any("budget" in p for p in res.problems())
+    with pytest.raises(lubjax.SolverError, match="stopped at"):
+        lubjax.relax(100.0, 0.5, 3.0, settings=lubjax.Settings(max_steps=250,
+                                                               error_estimate=False))
+
+
+def test_the_profile_interpolant_can_dip_below_its_nodes_so_its_film_is_checked():
+    # Accepted steps have positive films (the controller rejects any other); the profiles are
+    # the step's quadratic interpolant, which through positive films 1, 0.01, 0.02 reaches
+    # -0.11 at t = 1.49. That is the film Result.film_positive checks, and problems() words it.
+    from lubjax._multistep import dense_output
+    dip = dense_output(1.49, (0.0, 1.0, 2.0), (1.0, 0.01, 0.02), 2)
+    assert float(dip) == pytest.approx(-0.11, abs=2e-3)
+    res = lubjax.relax(100.0, 0.5, 1.0, profile_times=[0.5, 1.0], check="flag")
+    assert res.ok and res.film_positive
+    film = res.film.copy()
+    film[1, 3] = -1e-4
+    bad = dataclasses.replace(res, film=film, film_positive=False)
+    assert not bad.ok
+    assert bad.problems() == [f"the film profile at t̄ = 1 goes negative (h̄ = -0.0001 at "
+                              f"r̄ = {res.r[3]:.4g})"]
