@@ -75,8 +75,7 @@ class Evaluator:
     and θ are padded to a multiple of the device count (repeating the last trace) and laid out
     with ``NamedSharding(mesh, P("batch"))``, the solver (mesh arrays) replicated, and the one
     jit-ed call is a ``shard_map`` of the vmap-ed model over the devices; the padded rows are
-    cut off. With one device nothing is padded or placed: the call is the plain jit of
-    before."""
+    cut off. With one device nothing is padded or placed."""
 
     def __init__(self, data, solver, spec, layout: Layout, groups, devices: int = 1,
                  batching: str = "auto"):
