@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from ._checks import T_END_MAX, check_number, check_parameters
-from ._shape import Paraboloid
+from ._shape import as_indenter
 
 
 @dataclasses.dataclass(frozen=True)
@@ -285,7 +285,7 @@ def final_contact_radius(drive, z0, dr, indenter=None) -> float | None:
     if depth is None:
         return None
     if depth >= 0:
-        return (Paraboloid() if indenter is None else indenter).contact_radius(depth)
+        return as_indenter(indenter).contact_radius(depth)
     return 0.0 if -depth < 50.0 * dr**2 else None
 
 
@@ -309,14 +309,21 @@ DIMPLE_ERROR = 0.068
 DIMPLE_TARGET = 30.0
 
 
+def _film_refinement(settings, error, target, film, most) -> float:
+    """Δr̄/Δr̄_c, in [1, ``most``], for a film h̄ whose spatial error |Δh̄|/h̄ ≈ error·Δr̄_c²/h̄ on
+    an interior spacing Δr̄_c is to stay below target × rtol: Δr̄ √(error/(target rtol h̄))."""
+    dr = mesh_parameters(settings)[0]
+    needed = dr * math.sqrt(error / (target * settings.rtol * film))
+    return min(most, max(1.0, needed))
+
+
 def _interior_refinement(settings, beta, t_end) -> float:
     """How much finer than Δr̄ the contact interior needs to be for the trapped film a run ends
     with: 1 (not at all) for a run that ends before the film under the contact is thin
     (the default t̄ ≤ 5 run), up to ``Settings.contact_refinement`` for long holds."""
-    dr = mesh_parameters(settings)[0]
     h_min = NECK_CONSTANT / math.sqrt(beta * t_end)
-    needed = dr * math.sqrt(DIMPLE_ERROR / (DIMPLE_TARGET * settings.rtol * h_min))
-    return min(settings.contact_refinement, max(1.0, needed))
+    return _film_refinement(settings, DIMPLE_ERROR, DIMPLE_TARGET, h_min,
+                            settings.contact_refinement)
 
 
 #: The late neck's spatial error: |Δh̄_min|/h̄_min ≈ NECK_ERROR (Δr̄_rim/w)^NECK_ORDER for a rim
@@ -378,9 +385,8 @@ def _collision_refinement(settings, drive, z0, beta, rim) -> float:
     film = drive.collision_film(float(z0), beta)
     if film is None or rim <= 0:
         return 1.0
-    dr = mesh_parameters(settings)[0]
-    needed = dr * math.sqrt(COLLISION_ERROR * rim / (COLLISION_TARGET * settings.rtol * film))
-    return min(settings.rim_refinement, max(1.0, needed))
+    return _film_refinement(settings, COLLISION_ERROR * rim, COLLISION_TARGET, film,
+                            settings.rim_refinement)
 
 
 #: The near-dry contact's interior spacing, in units of Δr̄ per unit r̄: at most
