@@ -279,7 +279,7 @@ class Spring(_Drive):
             (α, s, b).
         """
         k = self.stiffness
-        # The stretch at tⁿ is F̄ⁿ/K̄, not from z̄ⁿ: rounding, as in Travel.row.
+        # The stretch at tⁿ as F̄ⁿ/K̄, not from z̄0 - z̄ⁿ: rounding, as in Travel.row.
         travel = self.history.travel(step.t_new) - self.history.travel(step.t)
         return 1.0, -k, k * travel + step.history.force[0]
 
