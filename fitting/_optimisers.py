@@ -8,14 +8,14 @@ r"""The optimisers of a fit (``method=``), each on every problem of the fit.
   per iteration. As optimistix writes a solver: a state (:class:`LMState`), :func:`lm_init`,
   :func:`lm_terminate` and :func:`lm_step`, composed by :func:`lm`.
 * ``"trf"``: ``scipy.optimize.least_squares`` (trust-region reflective) on the same residuals
-  and Jacobian, one problem after another (benchmarks/fit_benchmark.py compares the two).
+  and Jacobian, one problem after another (benchmarks/fit_benchmark.py compares the two). It is
+  not in the init/step/terminate shape because scipy runs the loop itself: one call per problem.
 * ``"lbfgs"``: ``optax.lbfgs`` on S with reverse-mode ``jax.grad`` (the stepper's checkpointed
-  scan), one problem after another. Its line search needs a smoother S than LM does: S is
-  smooth in θ only to the model's tolerance (the steps the controller takes change with θ), and
-  from data/paper_dc140.csv's physics start the zoom line search stalls in that roughness at
-  FIT_SETTINGS' rtol 3e-4, χ² 5.8 above the optimum after 60 iterations (not converged); with
-  ``settings=dataclasses.replace(FIT_SETTINGS, rtol=1e-5)`` (CLI: ``--rtol 1e-5``) it converges
-  in 20 (benchmarks/fit_benchmark.py --only optimisers, docs/accuracy.md, "Optimisers").
+  scan), one problem after another, in the same shape: :class:`LBFGSState`,
+  :func:`lbfgs_init`, :func:`lbfgs_step` and :func:`lbfgs_terminate`, composed by
+  :func:`lbfgs`. Its line search needs a smoother S than LM does: S is smooth in θ only to the
+  model's tolerance, so at FIT_SETTINGS' rtol 3e-4 it can stall short of the optimum; a
+  tighter rtol (CLI: ``--rtol 1e-5``) converges (docs/accuracy.md, "Optimisers").
 
 Convergence: the Gauss–Newton decrement gᵀ(JᵀJ)⁻¹g with g = Jᵀr, in units of the residual variance
 s² = 2S/(n - p), below ``tol`` (1e-4): the remaining step is under 1 % of a standard error. An
@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import NamedTuple
+from collections.abc import Callable
+from typing import TYPE_CHECKING, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -40,6 +41,9 @@ from lubjax._fitting_api import single_threaded_blas
 
 from . import _model
 from ._problem import Evaluator
+
+if TYPE_CHECKING:
+    import optax
 
 STALL_RTOL = 1e-7
 STALL_DECREMENT = 0.05
@@ -202,7 +206,7 @@ def lm(evaluate: Evaluator, x0s, n_samples, *, max_iter, tol, progress=None):
     return lm_outcomes(state, tol, max_iter)
 
 
-# --------------------------------------------------------------------------- scipy, optax
+# --------------------------------------------------------------------------- scipy
 
 
 def _single(evaluate: Evaluator, k, x0s):
@@ -252,57 +256,108 @@ def trf(evaluate, x0s, n_samples, *, max_iter, tol, progress=None):
     return out
 
 
-def lbfgs(evaluate, x0s, n_samples, *, max_iter, tol, progress=None):
-    """optax L-BFGS per problem on S = ½|r|², gradient by reverse mode (jax.grad)."""
+class LBFGSProblem(NamedTuple):
+    """Problem k alone for L-BFGS: its compiled iteration and its model run."""
+
+    iterate: Callable  # (x, opt_state) -> (x, opt_state, S at the old x)
+    run: Callable  # x -> (r, J, ok), the other problems held at their start
+    n_samples: int
+
+
+class LBFGSState(NamedTuple):
+    """L-BFGS's state for one problem (:func:`lbfgs_init`, :func:`lbfgs_step`)."""
+
+    x: jax.Array
+    opt_state: optax.OptState
+    iterations: int
+    done: bool
+    converged: bool
+    message: str
+
+
+def lbfgs_problem(evaluate: Evaluator, k, x0s, n_samples) -> LBFGSProblem:
+    """Problem k's loss S = ½|r|² (infinite where the film goes negative) and one compiled
+    ``optax.lbfgs`` iteration on it, gradient by reverse mode."""
     import optax
 
     spec, solver, lay = evaluate.spec, evaluate.solver, evaluate.layout
+    members = evaluate.groups[k]
+    datas = [jax.tree_util.tree_map(lambda a, t=t: a[t], evaluate.data) for t in members]
+    base = [jnp.asarray(lay.base[t]) for t in members]
+    Ms = [jnp.asarray(lay.M[t]) for t in members]
+
+    def loss(x):
+        total = 0.0
+        for d, b, m in zip(datas, base, Ms):
+            y, film = _model.predict(b + m @ x, d, solver, spec)
+            r = d.weight * (y - d.response) / d.noise
+            total = total + jnp.where(film > 0, 0.5 * jnp.sum(r**2), jnp.inf)
+        return total
+
+    opt = optax.lbfgs()
+    value_and_grad = optax.value_and_grad_from_state(loss)
+
+    @_compiler.jit
+    def iterate(x, opt_state):
+        value, grad = value_and_grad(x, state=opt_state)
+        updates, opt_state = opt.update(grad, opt_state, x, value=value, grad=grad,
+                                        value_fn=loss)
+        return optax.apply_updates(x, updates), opt_state, value
+
+    return LBFGSProblem(iterate, _single(evaluate, k, x0s), n_samples[k])
+
+
+def lbfgs_init(x0, max_iter) -> LBFGSState:
+    """The state at the start x0 (no model run)."""
+    import optax
+
+    x = jnp.asarray(x0)
+    return LBFGSState(x, optax.lbfgs().init(x), 0, False, False,
+                      f"not converged after {max_iter} iterations (L-BFGS's line search "
+                      "stalls where the error-controlled model is not smooth: a tighter "
+                      "tolerance, settings with rtol=1e-5 or the CLI's --rtol 1e-5, or method "
+                      "'lm')")
+
+
+def lbfgs_step(problem: LBFGSProblem, state: LBFGSState, progress=None) -> LBFGSState:
+    """One L-BFGS iteration (gradient and line search); a non-finite loss ends the problem."""
+    with single_threaded_blas():
+        x, opt_state, value = problem.iterate(state.x, state.opt_state)
+    it = state.iterations + 1
+    if progress is not None:
+        progress(it, np.array([float(value)]), np.array([False]))
+    state = state._replace(x=x, opt_state=opt_state, iterations=it)
+    if not math.isfinite(float(value)):
+        state = state._replace(done=True,
+                               message="stopped: non-finite loss (negative film or NaN)")
+    return state
+
+
+def lbfgs_terminate(problem: LBFGSProblem, state: LBFGSState) -> LBFGSState:
+    """Every fifth iteration (a model run with its Jacobian), converged where the Gauss–Newton
+    decrement is below ``STALL_DECREMENT``."""
+    if state.done or state.iterations % 5:
+        return state
+    r, J, ok = problem.run(np.asarray(state.x))
+    s2 = float(r @ r) / max(problem.n_samples - state.x.size, 1)
+    if ok and decrement(r, J, s2) < STALL_DECREMENT:
+        state = state._replace(done=True, converged=True,
+                               message="converged (Gauss-Newton decrement below tolerance)")
+    return state
+
+
+def lbfgs(evaluate, x0s, n_samples, *, max_iter, tol, progress=None):
+    """optax L-BFGS per problem on S = ½|r|²: init, then step-and-terminate until done or
+    ``max_iter`` is reached."""
     out = []
-    for k, members in enumerate(evaluate.groups):
-        datas = [jax.tree_util.tree_map(lambda a, t=t: a[t], evaluate.data) for t in members]
-        base = [jnp.asarray(lay.base[t]) for t in members]
-        Ms = [jnp.asarray(lay.M[t]) for t in members]
-
-        def loss(x, datas=datas, base=base, Ms=Ms):
-            total = 0.0
-            for d, b, m in zip(datas, base, Ms):
-                y, film = _model.predict(b + m @ x, d, solver, spec)
-                r = d.weight * (y - d.response) / d.noise
-                total = total + jnp.where(film > 0, 0.5 * jnp.sum(r**2), jnp.inf)
-            return total
-
-        opt = optax.lbfgs()
-        vg = optax.value_and_grad_from_state(loss)
-
-        @_compiler.jit
-        def one(x, state, vg=vg, opt=opt, loss=loss):
-            value, grad = vg(x, state=state)
-            updates, state = opt.update(grad, state, x, value=value, grad=grad, value_fn=loss)
-            return optax.apply_updates(x, updates), state, value
-
-        x = jnp.asarray(x0s[k])
-        state = opt.init(x)
-        at = _single(evaluate, k, x0s)
-        conv, it = False, 0
-        msg = (f"not converged after {max_iter} iterations (L-BFGS's line search stalls where "
-               "the error-controlled model is not smooth: a tighter tolerance, settings with "
-               "rtol=1e-5 or the CLI's --rtol 1e-5, or method 'lm')")
-        for it in range(1, max_iter + 1):
-            with single_threaded_blas():
-                x, state, value = one(x, state)
-            if progress is not None:
-                progress(it, np.array([float(value)]), np.array([False]))
-            if not math.isfinite(float(value)):
-                msg = "stopped: non-finite loss (negative film or NaN)"
-                break
-            if it % 5 == 0:
-                r, J, ok = at(np.asarray(x))
-                s2 = float(r @ r) / max(n_samples[k] - x.size, 1)
-                if ok and decrement(r, J, s2) < STALL_DECREMENT:
-                    conv, msg = True, "converged (Gauss-Newton decrement below tolerance)"
-                    break
-        r, J, _ = at(np.asarray(x))
-        out.append(Outcome(np.asarray(x), r, J, it, conv, msg))
+    for k in range(len(evaluate.groups)):
+        problem = lbfgs_problem(evaluate, k, x0s, n_samples)
+        state = lbfgs_init(x0s[k], max_iter)
+        while not state.done and state.iterations < max_iter:
+            state = lbfgs_terminate(problem, lbfgs_step(problem, state, progress))
+        r, J, _ = problem.run(np.asarray(state.x))
+        out.append(Outcome(np.asarray(state.x), r, J, state.iterations, state.converged,
+                           state.message))
     return out
 
 

@@ -1,11 +1,8 @@
 """JAX's persistent compilation cache for the command lines: a repeated ``lubjax`` or
 ``lubjax-fit`` call loads the compiled solver from disk instead of compiling it again.
 
-Never switched on by importing the library: only the CLIs call :func:`enable_compilation_cache`
-(or a user, explicitly). Where: ``$LUBJAX_CACHE_DIR``, else ``$XDG_CACHE_HOME/lubjax/jax``, else
-``~/.cache/lubjax/jax``. Off: ``LUBJAX_CACHE=0`` (or ``--no-cache``). The cache holds XLA
-executables keyed by the program, the jax version and the device; deleting the folder is always
-safe. (``fitting`` also keeps its lowered programs there: fitting/_cache.py.)
+Never switched on by importing the library. Off: ``LUBJAX_CACHE=0`` (or ``--no-cache``);
+deleting the folder is always safe (``fitting`` keeps its lowered programs there too).
 """
 
 from __future__ import annotations
@@ -16,7 +13,8 @@ import jax
 
 
 def cache_dir() -> str:
-    """The cache folder (see module docstring)."""
+    """The cache folder: ``$LUBJAX_CACHE_DIR``, else ``$XDG_CACHE_HOME/lubjax/jax``, else
+    ``~/.cache/lubjax/jax``."""
     path = os.environ.get("LUBJAX_CACHE_DIR")
     if path:
         return path

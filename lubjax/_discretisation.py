@@ -7,14 +7,9 @@ A_i = (r̄²_{i+1/2} - r̄²_{i-1/2})/2:
     A_i dh̄_i/dt̄ = β g_{i+1/2} (p̄_{i+1} - p̄_i) - β g_{i-1/2} (p̄_i - p̄_{i-1}),
 
 with the face conductances g ≈ r̄ h̄³/Δr̄ (:func:`face_conductance`) and h̄ = z̄ + s(r̄) + Ŵ p̄
-(eq 8a with w̄ = -Ŵ p̄, eq 21), s the indenter's rigid profile (r̄²/2 for the paper's paraboloid;
-lubjax/_shape.py), held at the nodes and the faces with the other per-mesh arrays. The axis
-needs no special row: the face at r̄ = 0 carries no flux, which is ∂p̄/∂r̄ = 0 there (eq 22a).
-The outer node carries p̄ = 0 (eq 22b) at a large L̄.
-
-Departure from the paper: the conservative form instead of the expanded form (17a) with the
-one-sided ∂p̄/∂r̄ (17c): it is second-order in space on any mesh (17c is first order), and the
-film volume changes exactly by the flux through the outer face (tests/test_analytic_limits.py).
+(eqs 8a, 21), s the indenter's rigid profile. The face at r̄ = 0 carries no flux (eq 22a); the
+outer node carries p̄ = 0 (eq 22b). Departs from the paper's expanded form (17a, c): second
+order on any mesh, the film volume changing exactly by the boundary flux.
 """
 
 from __future__ import annotations
@@ -31,16 +26,12 @@ from ._mesh import Mesh
 from ._shape import Paraboloid, as_indenter
 from ._substrate import HalfSpace, as_substrate
 
-#: Names the spatial discretisation, for caches of computed runs (benchmarks/accuracy.py): the
-#: pressure's squeeze-film-weighted hats (lubjax/_influence.py) and the radius inside the
-#: conductance's mean (:func:`face_conductance`) changed results at fixed settings.
+#: Names the spatial discretisation, for caches of computed runs (benchmarks/accuracy.py).
 DISCRETISATION = "psi-weighted hats, radius-weighted conductance"
 
 
 class Discretisation(NamedTuple):
-    """Mesh-dependent arrays, computed once per mesh (a pytree of arrays: pass it to jit).
-
-    Build it with :func:`discretise`. Lengths are in units of √(R d_c).
+    """Mesh-dependent arrays (:func:`discretise`), a pytree; lengths in units of √(R d_c).
 
     Attributes:
         r: the nodes r̄_i, shape (N,).
@@ -104,14 +95,12 @@ def _discretise(mesh: Mesh, elastic) -> Discretisation:
     shape = Paraboloid()
     arrays = (r, area, face, np.diff(r), w, area[:-1, None] * w[:-1, :-1], force_weights(mesh),
               shape.profile(r), shape.profile(face))
-    # device_put, not jnp.asarray: outside jit, jnp.asarray compiles a copy per new shape
-    # (~20 ms each, 0.15 s of a fresh relax call).
+    # device_put, not jnp.asarray: outside jit, jnp.asarray compiles a copy per new shape.
     return Discretisation(*(jax.device_put(np.asarray(a, np.float64)) for a in arrays))
 
 
 def film_thickness(disc: Discretisation, z, pressure):
-    """The film thickness h̄ = z̄ + s(r̄) - w̄ with w̄ = -Ŵp̄ (eqs 8a, 21), s = ``disc.profile``
-    (r̄²/2 for the paraboloid).
+    """The film thickness h̄ = z̄ + s(r̄) - w̄ with w̄ = -Ŵp̄ (eqs 8a, 21), s = ``disc.profile``.
 
     Args:
         disc: the :class:`Discretisation`.
@@ -163,18 +152,8 @@ def face_conductance(disc: Discretisation, h, h_mid):
         1/g = (Δr̄/r̄_f²) ∫ r̄ dr̄/h̄³ / Δr̄  by Simpson's rule,
             = (Δr̄/r̄_f²) (r̄_i/h̄_i³ + 4 r̄_f/h̄_m³ + r̄_{i+1}/h̄_{i+1}³)/6.
 
-    Why: integrating r̄h̄³ ∂p̄/∂r̄ = Q(r̄)/β across the cell, Δp̄ = ∫ Q/(β r̄ h̄³) dr̄, with the
-    flux Q(r̄) of a uniform source, Q ∝ r̄²: what the squeeze film has (∂h̄/∂t̄ = dz̄/dt̄ outside
-    the contact) and what every axisymmetric flow has near the axis. The harmonic mean of h̄³
-    rather than the arithmetic one: the arithmetic mean of nodal h̄³ overestimates the
-    conductance by ~(3Δh̄/h̄)²/8, 2 % per cell on the geometric outer mesh where h̄ ~ r̄². The
-    radius inside the mean rather than r̄_f ∫ dr̄/h̄³: on the outer mesh, whose cells are a
-    fixed fraction of r̄, leaving it out is an O((growth - 1)²) error of the squeeze film's
-    force, 1.0e-3 at growth 1.1 (rigid squeeze, β = 10⁶, with the weighted pressure of
-    lubjax/_influence.py; 6e-5 with the radius inside). Where the flux is constant
-    across a cell instead (the neck of a draining contact) the two differ by O((Δr̄/r̄)²), tiny
-    on the fine zone. Including the nodes makes a face close as either node's film closes, as
-    the continuous equation does (∂h̄/∂t̄ → 0 where h̄ → 0).
+    Exact for the flux of a uniform source, Q ∝ r̄² (the squeeze film's, and any flow's near
+    the axis); a face closes as either node's film closes (docs/design.md, "Departures").
     """
     r = disc.r
     mean = (r[:-1] / h[:-1] ** 3 + 4.0 * disc.face_r / h_mid**3 + r[1:] / h[1:] ** 3) / 6.0

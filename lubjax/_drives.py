@@ -1,47 +1,28 @@
 r"""Drives: what moves the sphere. A scene picks exactly one.
 
-The semi-discrete Reynolds equation (docs/model.md, "Drives") is
-
-    A (dz̄/dt̄ 1 + Ŵ dp̄/dt̄) = β T(h̄) p̄,                                   (R)
-
-N-1 rows for the pressures p̄_0..p̄_{N-2} (p̄_{N-1} = 0). The gap z̄ is one more unknown, so every
-drive adds exactly one row, linear in (p̄ⁿ⁺¹, Δz̄), Δz̄ = z̄ⁿ⁺¹ - z̄ⁿ, of the form
+The semi-discrete Reynolds equation A (dz̄/dt̄ 1 + Ŵ dp̄/dt̄) = β T(h̄) p̄ (docs/model.md, "Drives")
+has N-1 rows for p̄_0..p̄_{N-2}; the gap z̄ is one more unknown, so every drive adds one row,
+linear in (p̄ⁿ⁺¹, Δz̄ = z̄ⁿ⁺¹ - z̄ⁿ),
 
     α F̄ⁿ⁺¹ + s Δz̄ = b,        F̄ⁿ⁺¹ = c·p̄ⁿ⁺¹ (eq 11b),
 
-and each attempted step stays one (N)×(N) linear solve (the paper's Appendix does the same with
-two extra rows, z̄ and its velocity; we eliminate the velocity through the BDF formula). The
-step's time derivative is the BDF formula a₀yⁿ⁺¹ + a₁yⁿ + a₂yⁿ⁻¹ = Δt̄ ẏⁿ⁺¹ (a₁ = -(a₀ + a₂)).
+and each step stays one N×N linear solve (the paper's Appendix adds two rows, z̄ and its
+velocity; we eliminate the velocity through the BDF formula a₀yⁿ⁺¹ + a₁yⁿ + a₂yⁿ⁻¹ = Δt̄ ẏⁿ⁺¹).
 
-* :class:`Travel` — the travel d̄(t̄) is prescribed (the relaxation test, eqs 8c,d, or a
-  measured history): α = 0, s = 1, b = z̄0 - d̄(tⁿ⁺¹) - z̄ⁿ. The solve returns Δz̄ = b exactly.
-* :class:`Load` — the force is prescribed (force control, the paper's Appendix; creep):
-  α = 1, s = 0, b = F̄(tⁿ⁺¹).
-* :class:`Spring` — the sphere hangs on a spring of dimensionless stiffness K̄ from a stage
-  whose travel d̄(t̄) is prescribed; the spring carries the film force,
-  F̄ = K̄ (d̄(t̄) - (z̄0 - z̄)), i.e. the sphere lags the stage by F̄/K̄: α = 1, s = -K̄,
-  b = K̄ (d̄(tⁿ⁺¹) - z̄0 + z̄ⁿ). K̄ → ∞ is :class:`Travel`.
-* :class:`FreeSphere` — a sphere with inertia, dz̄/dt̄ = v̄, dv̄/dt̄ = G (F̄ - W̄) (Davis, Serayssol
-  & Hinch 1986). The film force pushes the sphere away (F̄ > 0) and W̄ (its weight less
-  buoyancy, or any constant load toward the substrate) pushes it in. BDF for both equations,
-  v̄ⁿ⁺¹ = (a₀Δz̄ - a₂Δz̄ⁿ)/Δt̄ (Δz̄ⁿ = z̄ⁿ - z̄ⁿ⁻¹) substituted in the second, times Δt̄:
-  α = -Δt̄² G, s = a₀², b = a₀a₂Δz̄ⁿ - Δt̄ (a₁v̄ⁿ + a₂v̄ⁿ⁻¹) - Δt̄² G W̄ (BDF3: one more level
-  of each history, b += a₀a₃(Δz̄ⁿ + Δz̄ⁿ⁻¹) - Δt̄ a₃v̄ⁿ⁻²).
-  No cavitation: on rebound the pressure turns negative and stays in the model, as in Davis
-  et al.
+* :class:`Travel` (eqs 8c,d): α = 0, s = 1, b = d̄(tⁿ) - d̄(tⁿ⁺¹).
+* :class:`Load` (the paper's Appendix): α = 1, s = 0, b = F̄(tⁿ⁺¹).
+* :class:`Spring`, F̄ = K̄ (d̄(t̄) - (z̄0 - z̄)): α = 1, s = -K̄, b = K̄ (d̄ⁿ⁺¹ - d̄ⁿ) + F̄ⁿ.
+* :class:`FreeSphere`, dz̄/dt̄ = v̄, dv̄/dt̄ = G (F̄ - W̄) (Davis, Serayssol & Hinch 1986): with
+  v̄ⁿ⁺¹ = (a₀Δz̄ - a₂Δz̄ⁿ)/Δt̄ substituted, times Δt̄: α = -Δt̄² G, s = a₀²,
+  b = a₀a₂Δz̄ⁿ - Δt̄ (a₁v̄ⁿ + a₂v̄ⁿ⁻¹) - Δt̄² G W̄ (BDF3: b += a₀a₃(Δz̄ⁿ + Δz̄ⁿ⁻¹) - Δt̄ a₃v̄ⁿ⁻²).
 
-Dimensionless numbers, all with the relaxation test's scales (docs/model.md, eq 7): lengths d_c,
-time t_c, force F_s = 2E* d_c^{3/2} √R/π (F = F_s F̄), so that β keeps its meaning as
-E* d_c^{5/2} t_c/(6π η R^{3/2} d_c). Which d_c and t_c a scene uses is its choice (the SI layer,
-:mod:`lubjax._units`, says which): for creep under a load F0 ramped in t_r it takes d_c = the Hertz
-indentation δ∞ = (3F0/(4E*√R))^{2/3} and t_c = t_r, so the load's plateau is F̄ = 2π/3 and the
-gap tends to z̄ = -1; for a collision d_c = the initial gap x0 and t_c = x0/V. Then
+Scales (docs/model.md, eq 7): lengths d_c, time t_c, force F_s = 2E* d_c^{3/2} √R/π, each scene
+choosing d_c and t_c (:mod:`lubjax._units`); then
 
     K̄ = k d_c / F_s = π k / (2E* √(R d_c)),    G = F_s t_c² / (m d_c) = 2β/(π St),
     St = m V/(6π η R²) (V = d_c/t_c),          W̄ = W / F_s.
 
-Every drive is a pytree: its numbers (K̄, G, W̄, v̄0, the load's scale, a sampled history's
-arrays) are leaves, so they can be differentiated, fitted and batched like β and z̄0.
+Every drive is a pytree whose numbers are leaves (differentiated, fitted, batched like β, z̄0).
 """
 
 from __future__ import annotations
@@ -56,9 +37,8 @@ from ._checks import check_number
 from ._indenter import RampHold
 from ._pytree import register
 
-#: A collision's thinnest film over its scale z̄0 ε^{2/5} (:meth:`FreeSphere.collision_film`):
-#: 0.24 measured at ε = 10⁻³ (St = 20-100), 10⁻⁴ (St = 10) and 10⁻⁵ (St = 20), converged
-#: (benchmarks/drives.py).
+#: A collision's thinnest film over its scale z̄0 ε^{2/5} (:meth:`FreeSphere.collision_film`;
+#: benchmarks/drives.py measures it).
 COLLISION_FILM = 0.24
 
 
@@ -71,13 +51,9 @@ def _check_history(history, name):
 
 
 class _Drive:
-    """What the stepper asks of a drive (all methods are pure and traceable).
-
-    Static flags: ``prescribes_gap`` (the gap's error is not the solver's, skip it in the error
-    estimate), ``prescribes_force`` (likewise for F̄), ``inertia`` (the velocity is a state of
-    the ODE: include it in the error estimate), ``force_nonnegative`` (a negative F̄ beyond
-    roundoff is an error of the step, not physics: true only for a monotone approach).
-    """
+    """What the stepper asks of a drive (pure, traceable methods). Flags: ``prescribes_gap`` /
+    ``prescribes_force`` (leave z̄ / F̄ out of the error estimate), ``inertia`` (the velocity is
+    a state), ``force_nonnegative`` (a negative F̄ is an error of the step)."""
 
     prescribes_gap = False
     prescribes_force = False
@@ -90,61 +66,27 @@ class _Drive:
         return self.history.t_start
 
     def breakpoints_array(self):
-        """The times t̄ of the drive's velocity jumps (steps restart small there).
-
-        Returns:
-            A 1-D float64 array of t̄ (units of t_c).
-        """
+        """The times t̄ (units of t_c) of the velocity jumps, where steps restart small."""
         return self.history.breakpoints_array()
 
     def initial_gap(self, z0):
-        """The gap at t̄_start, the sphere at rest.
-
-        Args:
-            z0: z̄0 = z0/d_c (eq 8e), the gap before any travel.
-
-        Returns:
-            z̄ at t̄_start (units of d_c).
-        """
+        """z̄ at t̄_start (units of d_c) from z̄0 (eq 8e), the gap before any travel."""
         return z0 - self.history.travel(self.history.t_start)
 
     def initial_velocity(self):
-        """dz̄/dt̄ at t̄_start (units of d_c/t_c): 0, the sphere at rest.
-
-        Returns:
-            v̄0.
-        """
+        """dz̄/dt̄ at t̄_start (units of d_c/t_c): 0, the sphere at rest."""
         return 0.0
 
     def final_depth(self, z0):
-        """How deep the sphere ends up pressed into the substrate, for the mesh rule
-        (:func:`lubjax.mesh_for`).
-
-        Args:
-            z0: z̄0 = z0/d_c (eq 8e).
-
-        Returns:
-            The depth (units of d_c; negative: it stops short of the surface), or None where
-            the drive does not tell where it ends (a free sphere).
-        """
+        """How deep (units of d_c; negative: short of the surface) the sphere ends up, for the
+        mesh rule (:func:`lubjax.mesh_for`); None where the drive does not tell."""
         return None
 
     def row(self, step):
-        """The closing row α F̄ⁿ⁺¹ + s Δz̄ = b of the step (the module docstring gives each
-        drive's α, s, b).
-
-        ``step.weights`` are the BDF weights a₀..a₃ (a₃ None where no step can be BDF3);
-        ``step.history.gap_step[0]`` is Δz̄ⁿ = z̄ⁿ - z̄ⁿ⁻¹ as solved (not a difference of the
-        stored gaps, which rounds it to the gap's ulp), ``step.history.force[0]`` is F̄ⁿ.
-
-        Args:
-            step: the step being taken (``lubjax._stepper.StepRecord``): tⁿ = ``step.t`` →
-                tⁿ⁺¹ = ``step.t_new``, Δt̄ = ``step.dt``, the BDF weights ``step.weights``
-                and the accepted levels ``step.history``, newest first.
-
-        Returns:
-            (α, s, b), scalars (traced under ``jit``) of the row α F̄ⁿ⁺¹ + s Δz̄ = b.
-        """
+        """The closing row's (α, s, b) (module docstring) for ``step``, a
+        ``lubjax._stepper.StepRecord``: tⁿ = ``step.t`` → tⁿ⁺¹ = ``step.t_new``, Δt̄ =
+        ``step.dt``, BDF weights a₀..a₃ ``step.weights`` (a₃ None without BDF3), accepted
+        levels ``step.history`` newest first (``gap_step[0]`` is Δz̄ⁿ as solved)."""
         raise NotImplementedError
 
 
@@ -200,10 +142,8 @@ class Travel(_Drive):
         Returns:
             (α, s, b).
         """
-        # Δz̄ = d̄(tⁿ) - d̄(tⁿ⁺¹), not (z̄0 - d̄(tⁿ⁺¹)) - z̄ⁿ: that difference of O(1) gaps rounds
-        # Δz̄ to the ulp of z̄ (2.2e-16 at z̄ ~ 1), a relative error of 1 in the squeeze velocity
-        # once Δz̄ is that small (a smooth start, d̄ ∝ t̄², at Δt̄ ~ 1e-11: the layer's force
-        # jumped 15 % between attempts and the steps collapsed). Zero while the sphere rests.
+        # Not (z̄0 - d̄(tⁿ⁺¹)) - z̄ⁿ: that difference of O(1) gaps rounds Δz̄ to the ulp of z̄,
+        # all of the squeeze velocity once Δz̄ is tiny (docs/design.md, "Numerical hygiene").
         return 0.0, 1.0, self.history.travel(step.t) - self.history.travel(step.t_new)
 
 
@@ -339,18 +279,15 @@ class Spring(_Drive):
             (α, s, b).
         """
         k = self.stiffness
-        # The spring's stretch at tⁿ is F̄ⁿ/K̄ (the last row), so b = K̄(d̄ⁿ⁺¹ - d̄ⁿ) + F̄ⁿ rather
-        # than K̄(d̄ⁿ⁺¹ - (z̄0 - z̄ⁿ)), whose O(1) difference rounds the stretch to the ulp of z̄
-        # (as Travel's row explains).
+        # The stretch at tⁿ as F̄ⁿ/K̄, not from z̄0 - z̄ⁿ: rounding, as in Travel.row.
         travel = self.history.travel(step.t_new) - self.history.travel(step.t)
         return 1.0, -k, k * travel + step.history.force[0]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class FreeSphere(_Drive):
-    """A free sphere with inertia: dz̄/dt̄ = v̄, dv̄/dt̄ = G (F̄ - W̄).
-
-    It starts at z̄0 with the film at rest (p̄ = 0). No velocity jumps: no breakpoints.
+    """A free sphere with inertia: dz̄/dt̄ = v̄, dv̄/dt̄ = G (F̄ - W̄), starting at z̄0 with the
+    film at rest (p̄ = 0).
 
     Attributes:
         inverse_mass: G = F_s t_c²/(m d_c) = 2β/(π St), dimensionless, > 0, with the Stokes
@@ -461,10 +398,8 @@ class FreeSphere(_Drive):
 
 
 def restitution(result, at_gap: float = 1.0) -> float:
-    """The coefficient of restitution of a :class:`FreeSphere` run.
-
-    The crossing is found on the stepper's interpolant (bisection between the accepted steps
-    that bracket it).
+    """The coefficient of restitution of a :class:`FreeSphere` run, the crossing bisected on
+    the stepper's interpolant.
 
     Args:
         result: the :class:`lubjax.Result` of a run with a :class:`FreeSphere` drive.
@@ -515,7 +450,6 @@ def as_drive(drive_or_history) -> _Drive:
     )
 
 
-# The histories are pytrees themselves (leaves: a sampled history's arrays).
 register(Travel, ("history",))
 register(Load, ("scale", "history"))
 register(Spring, ("stiffness", "history"))

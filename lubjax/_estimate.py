@@ -17,15 +17,10 @@ SMOOTH_SPACE_ORDER, EDGE_SPACE_ORDER = 2.0, 1.5
 BDF2_TIME_ORDER, EULER_TIME_ORDER = 2.0 / 3.0, 0.5
 #: :func:`error_estimate`, a pointwise bound, takes the lower orders: it is conservative.
 SPACE_ORDER, TIME_ORDER = EDGE_SPACE_ORDER, EULER_TIME_ORDER
-#: Each estimate is the largest over this many accepted steps either side: the true error and
-#: its estimate change sign at different times, and a pointwise bound must cover both.
+#: Each estimate is the largest over this many accepted steps either side: the error and its
+#: estimate change sign at different times.
 ESTIMATE_WINDOW = 2
-#: The safety factor of Roache's grid convergence index for two grids (Roache, Verification and
-#: Validation in Computational Science and Engineering, 1998). The estimates are two-level at
-#: assumed orders, and the errors are not always in their asymptotic range (the coarse mesh's
-#: error can be 1.5× the fine one's, not 2^{3/2}); with this factor the estimate bounds the
-#: force's error at every output time of the accuracy table's 20 cases, at 4.3-8.5× the largest
-#: error (docs/accuracy.md).
+#: Roache's two-grid safety factor (Roache 1998); docs/accuracy.md measures what it covers.
 SAFETY_FACTOR = 3.0
 
 
@@ -59,11 +54,8 @@ def error_estimate(value, coarse, loose):
 
         e_space = |y - y_coarse| / (2^{3/2} - 1),   e_time = |y_coarse - y_loose| / (8^{1/2} - 1),
 
-    Richardson's estimates at the orders :data:`SPACE_ORDER` and :data:`TIME_ORDER` (global
-    error ∝ Δr̄^{3/2} and ∝ rtol^{1/2}), summed, times :data:`SAFETY_FACTOR`, and spread over
-    ±``ESTIMATE_WINDOW`` steps. Measured against converged runs (benchmarks/accuracy.py): the
-    force's estimate bounds its error at ≥ 95 % of the output times in every case of the table,
-    and overestimates the largest error 4-9 times."""
+    Richardson's estimates at the orders :data:`SPACE_ORDER` and :data:`TIME_ORDER`, summed,
+    times :data:`SAFETY_FACTOR`, spread over ±``ESTIMATE_WINDOW`` steps."""
     space = richardson(np.abs(value - coarse), 2.0, SPACE_ORDER)
     time_ = richardson(np.abs(coarse - loose), LOOSENING, TIME_ORDER)
     total = SAFETY_FACTOR * (space + time_)
@@ -74,7 +66,7 @@ def error_estimate(value, coarse, loose):
 
 def errors_of(series, trajs) -> dict:
     """Each estimated series' error from the estimate's coarse runs (NaN where they were not
-    run). On the host (evaluate_host): evaluating with jax compiles ~40 small programs."""
+    run), on the host: with jax it would compile ~40 small programs."""
     if len(trajs) == 1:
         return {f: np.full_like(series[f], np.nan) for f in ESTIMATED}
     coarse, loose = (tr.steps for tr in trajs[1:])

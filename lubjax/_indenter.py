@@ -1,13 +1,8 @@
 """Indenter histories: the travel d̄(t̄) of the sphere toward the substrate, z̄(t̄) = z̄0 - d̄(t̄).
 
-Every history, ideal or measured, reaches the stepper the same way: ``travel(t)`` evaluated
-wherever the step-size controller puts a step. The initial gap z̄0 stays a separate scalar so
-that it can be differentiated, swept with ``vmap`` and fitted without rebuilding the history.
-
-``breakpoints`` are times where the indenter velocity jumps; the stepper lands a step on each
-and restarts there with a short step (the pressure responds on the fast time scale 1/β after a
-velocity jump). Both histories are pytrees: a batch of measured histories (same sample count)
-can be stacked and ``vmap``-ed.
+The stepper evaluates ``travel(t)`` wherever it puts a step, and lands a short step on each of
+the ``breakpoints``, where the velocity jumps (the pressure responds on the time scale 1/β).
+z̄0 stays a separate scalar (differentiated, swept, fitted); histories are pytrees.
 """
 
 from __future__ import annotations
@@ -84,14 +79,8 @@ class RampHold:
 @dataclasses.dataclass(frozen=True, eq=False)
 class SampledTravel:
     """A measured travel history d̄(t̄), interpolated by a monotone cubic (Fritsch–Carlson, i.e.
-    PCHIP); held constant before the first and after the last sample.
-
-    Why not linear interpolation: a stage moves smoothly, and a piecewise-linear travel has a
-    velocity jump at every sample. The error-controlled stepper then either lands on each (a
-    restart every 10 ms of a 100 Hz record) or straddles them with first-order local errors that
-    depend on where its steps fall, which made the force jump with the parameters (its
-    derivative by central differences scattered by 1e-2 at rtol = 1e-6). The monotone cubic is
-    C¹, never overshoots the samples, and reproduces a linear ramp exactly away from its ends.
+    PCHIP: C¹, no overshoot; docs/design.md, "Numerical hygiene"); held constant before the
+    first and after the last sample.
 
     Attributes:
         t: sample times t̄ (units of t_c), strictly increasing, at least 2.
@@ -120,8 +109,7 @@ class SampledTravel:
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "travel_samples", d)
         object.__setattr__(self, "slopes", _monotone_slopes(t, d))
-        # Never retracting: then a negative film force is a step error, not physics (a leaf,
-        # not static, so stacked histories of both kinds still vmap together).
+        # A leaf, not static, so stacked histories of both kinds still vmap together.
         object.__setattr__(self, "monotone", np.bool_(np.all(np.diff(d) >= 0)))
         if not len(self.breakpoints):
             object.__setattr__(self, "breakpoints", _motion_breakpoints(t, d))

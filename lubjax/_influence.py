@@ -15,30 +15,11 @@ hat functions φ_j times a fixed weight ψ (the nodal values are still p̄_j), s
 
 and the force F̄ = 2π ∫ p̄ r̄ dr̄ = c·p̄ of the same representation (eq 11b).
 
-Departures from the paper (eq 21), and why:
-
-* The paper holds p̄ constant on each cell, which is first-order in the pressure representation
-  at a mesh-size jump and does not integrate the force exactly. Hat functions give a
-  second-order representation on any (graded) mesh and the same matrix cost.
-* The weight ψ: outside the contact the film pressure is the squeeze film's,
-  p̄ ∝ (z̄ + r̄²/2)⁻² → 4r̄⁻⁴ (eq 12b), and on the geometric outer mesh, whose cells are a fixed
-  fraction of r̄, plain hats interpolate that decay with an O((growth - 1)²) relative error that
-  does not shrink outwards: it was the largest part of the far field's error (F̄ off by
-  0.18 (growth - 1)² at z̄0 = 2, so a growth of 1.05 was needed, half the nodes of the mesh).
-  ψ(ū)·(linear) follows a (1 + ū²/2)⁻² tail exactly and a (z̄ + ū²/2)⁻² one to
-  O(|z̄ - 1| (growth-1)²/ū²), so the outer cells can grow by 1.15-1.5
-  (tests/test_analytic_limits.py: the rigid squeeze film; docs/accuracy.md). Inside the fine
-  zone ψ changes by ≲ 2 % across a cell: the representation stays second order there, with
-  errors measured no larger than plain hats'.
-
-Every node r̄_i is an element end, so the log singularity of K at ū = r̄_i,
-K ≈ ln(4(ū+r̄)/|ū-r̄|), always sits at an endpoint of an element integral. We integrate each
-element with tanh-sinh (double-exponential) quadrature, which converges exponentially for
-endpoint log singularities, and compute the distance |ū - r̄_i| from the nearer element end
-without cancellation, so 1 - m = ((ū-r̄)/(ū+r̄))² is accurate right up to the singular point
-(scipy's ``ellipkm1`` takes 1 - m directly).
-
-The matrix depends only on the mesh: it is computed once in numpy and cached per mesh.
+Departs from the paper's constant-per-cell p̄ (eq 21): hats are second order on a graded mesh,
+and ψ follows the squeeze film's r̄⁻⁴ tail (eq 12b) on the coarse outer cells, so they can grow
+by 1.15 instead of 1.05 (docs/design.md, "Departures from the paper"). The log singularity of K
+at ū = r̄_i always sits at an element end: tanh-sinh quadrature, with |ū - r̄_i| taken from the
+nearer end without cancellation (``ellipkm1`` takes 1 - m directly). Cached per mesh.
 """
 
 from __future__ import annotations
@@ -50,19 +31,14 @@ from scipy.special import ellipkm1
 
 from ._mesh import Mesh
 
-# tanh-sinh abscissae in τ: x = tanh(π/2 sinh τ). Step 1/20 over |τ| ≤ 3.3 reaches
-# ~1e-14 relative accuracy for the log-singular kernels here (checked against mpmath in tests).
+# tanh-sinh abscissae x = tanh(π/2 sinh τ), step 1/20 over |τ| ≤ 3.3: ~1e-14 (mpmath, tests).
 _TAU = np.arange(-3.3, 3.3 + 1e-12, 0.05)
 _S = 0.5 * np.pi * np.sinh(_TAU)
-# Fractions of the element length from the left end (fa) and from the right end (fb), both
-# computed without cancellation, and the quadrature weight in units of the element length.
+# Fractions of the element from its left (fa) and right (fb) end, without cancellation.
 _FA = 1.0 / (1.0 + np.exp(-2.0 * _S))
 _FB = 1.0 / (1.0 + np.exp(2.0 * _S))
-# Weight for ∫₀¹ f(ξ) dξ with ξ = (1+x)/2: step · dx/dτ / 2.
-_WT = 0.05 * (0.5 * np.pi * np.cosh(_TAU) / np.cosh(_S) ** 2) / 2.0
-# Gauss-Legendre on [0, 1] for the smooth force integrals: ψ's poles at ±i√2 lie at least ~6
-# half-widths from any element of a mesh whose cells grow by ≤ 1.5, so 12 points are exact to
-# rounding.
+_WT = 0.05 * (0.5 * np.pi * np.cosh(_TAU) / np.cosh(_S) ** 2) / 2.0  # ∫₀¹ dξ, ξ = (1+x)/2
+# Gauss-Legendre for the force: ψ's poles at ±i√2 lie ≳ 6 half-widths from any element.
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
 _GL_X, _GL_W = 0.5 * (_GL_X + 1.0), 0.5 * _GL_W
 
@@ -75,8 +51,6 @@ def pressure_weight(r):
 
 def kernel(u: np.ndarray, r: float | np.ndarray, distance: np.ndarray | None = None) -> np.ndarray:
     """The kernel of the elastic integral (eqs 8b, 21): G(ū, r̄) = ū/(ū+r̄) K(4ūr̄/(ū+r̄)²).
-
-    K is the complete elliptic integral of the first kind, log-singular at ū = r̄.
 
     Args:
         u: ū, source radii (units of √(R d_c)); an array.
@@ -98,10 +72,7 @@ def kernel(u: np.ndarray, r: float | np.ndarray, distance: np.ndarray | None = N
 def influence_matrix(mesh: Mesh, weighted: bool = True) -> np.ndarray:
     """The half-space's influence matrix (eq 21): w̄_i = -Σ_j Ŵ_ij p̄_j.
 
-    Ŵ_ij = (8/π²) ∫ G(ū, r̄_i) φ_j(ū) dū, with the pressure represented as ψ(r̄) times the hat
-    interpolant of p̄/ψ, ψ = (1 + r̄²/2)⁻² (docs/model.md, Discretisation), by tanh-sinh
-    quadrature with the log singularity at an element end. Cached per mesh: a fit or a sweep
-    reuses it.
+    Ŵ_ij of the representation (P) (module docstring), cached per mesh.
 
     Args:
         mesh: the :class:`lubjax.Mesh`.
@@ -114,7 +85,6 @@ def influence_matrix(mesh: Mesh, weighted: bool = True) -> np.ndarray:
     r = mesh.r
     n = r.size
     length = np.diff(r)
-    # Vectorised over elements, looped over collocation nodes (n × (n-1) × Q kernel calls).
     a = r[:-1, None]
     b = r[1:, None]
     da = length[:, None] * _FA[None, :]
@@ -138,8 +108,7 @@ def influence_matrix(mesh: Mesh, weighted: bool = True) -> np.ndarray:
 
 
 def force_weights(mesh: Mesh) -> np.ndarray:
-    """The force weights: F̄ = c·p̄ = 2π ∫ p̄ r̄ dr̄ (eq 11b), exact for the ψ-weighted hat
-    representation of p̄ (docs/model.md, Discretisation).
+    """The force weights: F̄ = c·p̄ = 2π ∫ p̄ r̄ dr̄ (eq 11b), exact for the representation (P).
 
     Args:
         mesh: the :class:`lubjax.Mesh`.

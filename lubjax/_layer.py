@@ -6,28 +6,22 @@ the surface deflection is (the half-space's eq 4 times a transfer function C)
 
     w(r) = -(2/E*) ∫₀^∞ C(kH) p̃(k) J₀(kr) dk,                                     (L1)
 
-with C → 1 as kH → ∞: the half-space, since ∫₀^∞ J₀(ks) J₀(kr) dk = 2K(4sr/(s+r)²)/(π(s+r))
-turns (L1) with C ≡ 1 into eq 4. C is the plane-strain Fourier transfer function of the layer
-(a Fourier mode cos(k·x) of a 3-D load is a plane-strain problem along k, and the Hankel
-transform is the 2-D Fourier transform of a radial function). Solving Navier's equations for
-u_x = U(z) sin kx, u_z = W(z) cos kx, U, W ∈ span{e^{±kz}, z e^{±kz}}, with σ_zz = -p̂,
+with C → 1 as kH → ∞ (the half-space, eq 4). C is the layer's plane-strain Fourier transfer
+function: Navier's equations for u_x = U(z) sin kx, u_z = W(z) cos kx with σ_zz = -p̂,
 σ_xz = 0 on the surface and, at depth H, u_x = u_z = 0 (bonded) or u_z = σ_xz = 0
-(frictionless), gives (t = kH, κ = 3 - 4ν)
+(frictionless), give (t = kH, κ = 3 - 4ν)
 
     bonded:        C(t) = (2κ sinh 2t - 4t) / (2κ cosh 2t + 4t² + κ² + 1),
     frictionless:  C(t) = (cosh 2t - 1) / (sinh 2t + 2t),                          (L2)
 
-the first the classical bonded-layer kernel (as used by Chandler & Vella, Proc. R. Soc. A 476,
-2020; thin limits as in Johnson, Contact Mechanics, 1985; citations not re-read here). Both were
-derived here (sympy) and tests/test_layer.py solves the 4×4 boundary-value problem numerically
-against them. Thin limits (t → 0):
+the first the classical bonded-layer kernel (Chandler & Vella, Proc. R. Soc. A 476, 2020;
+tests/test_layer.py solves the 4×4 boundary-value problem against both). Thin limits (t → 0):
 
 * bonded, ν < ½:  C ≈ t (1-2ν)/(2(1-ν)²): w = -p H (1-2ν)(1+ν)/((1-ν)E), uniaxial strain
   (a Winkler foundation of modulus λ + 2G);
 * bonded, ν = ½:  C ≈ 2t³/3: w = (H³/(3G)) ∇²p (E* = 4G), the incompressible thin layer;
-* frictionless, any ν: C ≈ t/2: w = -p H/E* = -p H (1-ν²)/E. The layer slides on its base,
-  so it is *not* in uniaxial strain: the in-plane stress trace is -ν p (a membrane with an
-  isotropic eigenstrain), and the incompressible layer is compressible in this limit.
+* frictionless, any ν: C ≈ t/2: w = -p H/E* (the layer slides on its base: not uniaxial
+  strain, and the incompressible layer is compressible in this limit).
 
 Dimensionless form (eq 8b scales, k̄ = k √(R d_c), H̄ = H/√(R d_c)): with hat functions φ_j on the
 mesh as in ``_influence`` (w̄_i = -Σ_j Ŵ_ij p̄_j),
@@ -41,14 +35,9 @@ and C ≡ 1 is the half-space matrix (8/π²)∫φ_j s/(s+r̄_i) K ds of ``influ
 the log singularity stays in Ŵ_half (tanh-sinh quadrature, ``_influence``), and ΔŴ is a smooth
 remainder, its integrand cut off where |C - 1| ~ (4t² + ...) e^{-2t} < 1e-17.
 
-The layer represents the pressure by plain hat functions in both parts (``influence_matrix(mesh,
-weighted=False)``), not by the half-space's squeeze-film-weighted ones (``_influence``): ΔŴ's
-transforms are closed-form only for plain hats, and on a thin layer Ŵ_layer is the small
-difference of Ŵ_half and -ΔŴ, which must share one representation (with the weight in Ŵ_half
-alone four of the thin-layer tests of tests/test_layer.py failed: the mismatch left an
-O(Δr̄²) residue of Ŵ_half in the thin response). The force weights, the conductances and the
-mesh are the half-space's. Measured (β = 100, z̄0 = 0.8, t̄ ≤ 5, H̄ = 3, 10, 30): outer growth
-1.15 is within 7e-5 of 1.03, 1.3 within 3.2e-4 (the weight in Ŵ_half as well: 8e-5, 3.5e-4).
+Both parts use plain hats (``influence_matrix(mesh, weighted=False)``), not the half-space's
+weighted ones: ΔŴ's transforms are closed-form only for plain hats, and on a thin layer
+Ŵ_layer is the small difference of Ŵ_half and -ΔŴ, which must share one representation.
 
 Hat transforms in closed form: integrating by parts once, with Φ(s) = s J₁(ks)/k (Φ' = s J₀(ks)),
 
@@ -56,17 +45,14 @@ Hat transforms in closed form: integrating by parts once, with Φ(s) = s J₁(ks
                                         Φ(r̄_{N-1}) - ⟨Φ⟩_{e_{N-2}}),
     ⟨Φ⟩_{[a,b]} = (Ψ(kb) - Ψ(ka)) / ((b - a) k³),   Ψ(x) = ∫₀^x t J₁(t) dt = ∫₀^x J₀ - x J₀(x),
 
-Ψ by its power series for x < 2 (where ∫J₀ - xJ₀ cancels), else ∫₀^x J₀ - xJ₀(x) with ∫₀^x J₀ from
-scipy's ``itj0y0`` for x ≥ 42 only: below, ``itj0y0`` is off by up to 1e-9 (x ≈ 20, measured against
-mpmath), so [2, 42] uses piecewise Chebyshev interpolants of the Neumann series
-∫₀^x J₀ = 2 Σ_m J_{2m+1}(x) (error < 1e-14).
+Ψ by its power series for x < 2 (where ∫J₀ - xJ₀ cancels), else with ∫₀^x J₀ from Chebyshev
+interpolants of Neumann's series 2 Σ_m J_{2m+1}(x) on [2, 42] (``itj0y0`` is off by up to 1e-9
+there) and ``itj0y0`` beyond.
 
-Quadrature in k̄: Gauss-Legendre panels (48 points) on [0, t_max/H̄]; a panel's width keeps the
-phase (r̄_i + r̄_j) k̄ of the fastest product J₀(k̄ r̄_i) φ̃_j(k̄) within 100 rad (48-point rule
-exact to ~1e-14 there) and k̄H̄ within 2 (C's own scale). The node count, ≈ 9.6 L̄ t_max/H̄, is
-what a thin layer on a long mesh costs: above ``MAX_NODES`` we refuse rather than take minutes.
-ΔŴ is accumulated as chunked products A (N×K_c) @ B (K_c×N), A = J₀(k̄ r̄_i),
-B = w_k (C - 1) φ̃_j, to bound memory.
+Quadrature in k̄: 48-point Gauss-Legendre panels on [0, t_max/H̄], each spanning at most 100 rad
+of the fastest phase (r̄_i + r̄_j) k̄ and 2 of k̄H̄; ≈ 9.6 L̄ t_max/H̄ nodes, refused above
+``MAX_NODES``. ΔŴ accumulates in chunks A (N×K_c) @ B (K_c×N), A = J₀(k̄ r̄_i),
+B = w_k (C - 1) φ̃_j.
 """
 
 from __future__ import annotations
@@ -81,8 +67,7 @@ from ._checks import check_layer_base, check_poisson, check_positive
 from ._influence import influence_matrix
 from ._mesh import Mesh
 
-#: Gauss-Legendre points per k̄-panel, the largest half-phase (rad) a panel may span for the
-#: fastest oscillation, and the largest k̄H̄ it may span (C varies on k̄H̄ ~ 1).
+#: Gauss-Legendre points per k̄-panel, its largest half-phase (rad) and k̄H̄ span.
 _PANEL_POINTS = 48
 _PANEL_PHASE = 50.0
 _PANEL_T = 2.0
@@ -97,8 +82,7 @@ MAX_NODES = 150_000
 #: Entries (N × k̄ nodes) per chunk of the A @ B product: ≈ 9 MB per work array, whatever N.
 _CHUNK_ENTRIES = 1 << 20
 
-#: Power series of Ψ(x) = ∫₀^x t J₁(t) dt = Σ_m (-1)^m x^{2m+3} / ((2m+3) 2^{2m+1} m! (m+1)!),
-#: used for x < 2, where its 16 terms are exact to rounding.
+#: Ψ(x) = Σ_m (-1)^m x^{2m+3} / ((2m+3) 2^{2m+1} m! (m+1)!), 16 terms: exact for x < 2.
 _PSI_SERIES = np.array(
     [(-1) ** m / ((2 * m + 3) * 2.0 ** (2 * m + 1) * math.factorial(m) * math.factorial(m + 1))
      for m in range(16)]
@@ -135,9 +119,8 @@ def transfer_minus_one(t: np.ndarray, poisson: float, interface: str) -> np.ndar
         num = 2.0 * kappa * e4 + (4.0 * t * t + 4.0 * t + kappa * kappa + 1.0) * e2
         den = kappa * (1.0 + e4) + (4.0 * t * t + kappa * kappa + 1.0) * e2
         return -num / den
-    # frictionless. Small t: C = 2 sinh²t/(sinh 2t + 2t) has no cancellation; large t: the
-    # exponential form.
-    # (At t = 0 exactly, C = 0: ts = 1 there only keeps 0/0 out of the unused branch.)
+    # frictionless: small t as 2 sinh²t/(sinh 2t + 2t) (no cancellation), large t exponential;
+    # ts = 1 at t = 0 only keeps 0/0 out of the unused branch.
     small = t < 1.0
     ts = np.where(small & (t > 0), t, 1.0)
     tl = np.where(small, 1.0, t)
@@ -168,8 +151,7 @@ _CHEB_LO, _CHEB_WIDTH, _CHEB_PIECES, _CHEB_DEG = 2.0, 4.0, 10, 20
 
 @functools.lru_cache(maxsize=1)
 def _cheb_coefficients() -> np.ndarray:
-    """Chebyshev coefficients (pieces × degree+1) of ∫₀^x J₀ = 2 Σ_m J_{2m+1}(x) (Neumann's
-    series: each term is accurate to rounding, and 60 terms reach past x = 42)."""
+    """Chebyshev coefficients (pieces × degree+1) of ∫₀^x J₀ = 2 Σ_m J_{2m+1}(x), 60 terms."""
     orders = 2 * np.arange(60) + 1
     coef = []
     for piece in range(_CHEB_PIECES):
@@ -270,9 +252,7 @@ def layer_influence_matrix(
     """The influence matrix of a layer on a rigid base: w̄_i = -Σ_j Ŵ_ij p̄_j for the nodal
     pressures p̄ on ``mesh``, piecewise linear between them.
 
-    The half-space's matrix with plain hat functions (``influence_matrix(mesh,
-    weighted=False)``, its H̄ → ∞ limit) plus the smooth remainder of the transfer function
-    C(kH) - 1 (docs/model.md, Substrates). Cached per (mesh, H̄, ν, interface).
+    The plain-hat half-space matrix plus the smooth remainder ΔŴ of C(kH) - 1 (L4), cached.
 
     Args:
         mesh: the :class:`lubjax.Mesh`.

@@ -1,15 +1,8 @@
-"""Radial meshes: node positions r̄_0 = 0 < r̄_1 < ... < r̄_{N-1} = L̄.
+"""Radial meshes r̄_0 = 0 < ... < r̄_{N-1} = L̄, and the mesh rule (:func:`mesh_for`).
 
-The paper (Section 5) uses a uniform mesh on [0, 4] with p̄(L̄) = 0. That truncation drops the
-r̄⁻⁴ pressure tail of the squeeze film: the fraction z̄/(z̄ + L̄²/2) of the force (6-20 % for
-L̄ = 4, see docs/model.md). We instead default to a *graded* mesh: uniform and fine where the contact
-lives, then geometrically coarser out to a large L̄, so the truncation costs a few dozen nodes.
-
-The **mesh rule** (:func:`mesh_for`) is here too: the spacing, growth and length a tolerance
-gets (:func:`mesh_from_tolerance`), the mesh of a ``Settings`` (:func:`mesh_parameters`,
-:func:`settings_mesh`: ``Settings`` holds the numbers, this module builds the mesh), and how
-much a run refines the edge and the interior of the contact it ends in, for the thin film a
-long hold drains to.
+Departs from the paper's uniform [0, 4] (which drops the r̄⁻⁴ pressure tail, 6-20 % of the
+force): uniform and fine where the contact lives, then geometric out to a large L̄. The numbers
+of the rule are argued in docs/design.md, "The mesh rule".
 """
 
 from __future__ import annotations
@@ -20,7 +13,7 @@ import math
 import numpy as np
 
 from ._checks import T_END_MAX, check_number, check_parameters
-from ._shape import Paraboloid
+from ._shape import as_indenter
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,21 +101,8 @@ def graded_mesh(
     contact_slope: float | None = None,
 ) -> Mesh:
     """Uniform spacing ``dr`` on [0, r_fine], then cells growing by ``growth`` up to ``length``;
-    optionally refined to ``rim_dr`` around the radius ``rim`` and to ``contact_dr`` inside it.
-
-    Why the rim: in a long hold with z̄0 < 1 the film drains through a neck at the Hertz
-    contact's edge r̄ = a; near it h̄ ≈ h̄_min + c (r̄ - a)^{3/2}, so the neck is ~(h̄_min)^{2/3}
-    wide: 0.01 at h̄_min = 10⁻³. A uniform dr = 0.014 under-resolves it; the flux through the
-    neck (∝ h̄_min³) then sets the whole late drainage: h̄_min was 20 % off at t̄ = 10³ (β = 10³,
-    z̄0 = 0.5), 1.3 % with rim_dr = dr/7 (measured against a run refined to 0.0005 there).
-    ``rim = 0`` refines at the axis instead: a sphere that just touches (z̄0 = travel) presses a
-    pressure spot that shrinks without bound as the film drains (half-width 0.014 at t̄ = 10³,
-    β = 10³: one cell of dr = 0.014).
-
-    Why the contact interior: inside a Hertz contact the trapped film h̄(0) ≈ 10⁻² is the small
-    difference of z̄ + r̄²/2 and -w̄ ≈ 0.5, so 1 % of h̄(0) needs w̄ to 2·10⁻⁵ of itself: the
-    O(dr²) error of the piecewise-linear pressure then asks for about half the spacing that the
-    flow outside the contact needs.
+    optionally refined to ``rim_dr`` around the radius ``rim`` (the neck at a contact's edge;
+    ``rim = 0``: the axis) and to ``contact_dr`` inside it (the trapped film).
 
     Args:
         dr: Δr̄, spacing in the fine zone (units of √(R d_c)), > 0; the zone must cover the
@@ -180,7 +160,6 @@ def graded_mesh(
         step *= growth
         nxt = nodes[-1] + step
         if nxt >= length:
-            # Merge a short last cell into its neighbour rather than leave a sliver.
             if length - nodes[-1] < 0.5 * step:
                 nodes[-1] = length
             else:
@@ -208,21 +187,9 @@ def film_held_by_force(film_error: str, beta):
 
 
 def mesh_from_tolerance(rtol: float) -> tuple[float, float, float]:
-    """(dr, mesh growth, L̄) for a tolerance, so that the spatial error stays below the time
-    error. The force's spatial error is ∝ dr^{1.7-2} (tests/test_convergence.py fits the order)
-    and falls steeply with the outer cells' growth, while the global time error is ∝ rtol^{2/3}
-    (tests/test_stepper.py): both mesh sizes ∝ rtol^{1/4} keeps the two in
-    step (a rule ∝ √rtol refined far too fast below 1e-4: 52 s for a t̄ ≤ 5 run at 1e-5). The
-    growth 1.15 at the default: with the squeeze-film weight of the pressure representation
-    (lubjax/_influence.py) and the radius inside the conductance's mean (_stepper), the far
-    field's error during a ramp falls steeply with the growth (the rigid squeeze film is within
-    2.5e-4 at growth 1.3, tests/test_analytic_limits.py; it was 0.18 (growth - 1)² of F̄ with
-    plain hats, so 1.05 was needed: 271 nodes where 1.15 needs 177). The hold of an open film
-    (z̄0 > 1) is less kind: its elastic recovery gives an r̄⁻⁵ tail that the weight does not
-    follow, and its decay rate, so F̄ pointwise late in the tail, was 4.1e-3 off at growth 1.25,
-    7.4e-4 at 1.1 (β = 1, 10, z̄0 = 2, dr 0.014, time tolerance 1e-6; benchmarks/accuracy.py's
-    references). The domain truncation ≈ 4z̄/L̄² of the force (docs/model.md) is kept below rtol/8
-    for z̄ ≤ 1."""
+    """(Δr̄, growth, L̄) for a tolerance: Δr̄ and growth - 1 ∝ rtol^{1/4}, the spatial error in
+    step with the time error ∝ rtol^{2/3}, and the truncation 4z̄/L̄² below rtol/8 for z̄ ≤ 1
+    (docs/design.md, "The mesh rule")."""
     scale = (rtol / DEFAULT_RTOL) ** 0.25
     dr = min(0.05, max(0.002, 0.014 * scale))
     growth = 1.0 + min(0.5, max(0.02, 0.15 * scale))
@@ -251,8 +218,7 @@ def settings_mesh(settings, contact_radius: float | None = None,
                   rim_refinement: float | None = None,
                   contact_slope: float | None = None) -> Mesh:
     """The mesh of ``settings`` (:func:`mesh_parameters`), refined around a contact's edge
-    where one is given (:func:`graded_mesh`); ``Settings.mesh`` documents the arguments. With
-    none of them it is the mesh a batch shares (``make_plan``, ``sweep``, the fits)."""
+    where one is given (``Settings.mesh`` documents the arguments); without, a batch's mesh."""
     dr, growth, length = mesh_parameters(settings)
     rim = contact_radius
     if rim is None and not isinstance(settings.contact_radius, str):
@@ -268,70 +234,60 @@ def settings_mesh(settings, contact_radius: float | None = None,
     )
 
 
-#: Late in a hold the neck at the contact edge thins as h̄_min ≈ NECK_CONSTANT/√(β t̄)
-#: (measured: h̄_min √(β t̄) = 0.12-0.28 for β ∈ [10, 10⁴], z̄0 ∈ [0.05, 0.9], t̄ ∈ [10, 10³];
-#: the larger value is taken, so a neck is thought resolvable rather than not).
+#: Late in a hold the neck at the contact edge thins as h̄_min ≈ NECK_CONSTANT/√(β t̄).
 NECK_CONSTANT = 0.3
 
 
 def final_contact_radius(drive, z0, dr, indenter=None) -> float | None:
-    """Edge of the dry contact the drive ends in (dimensionless), from the depth it ends at
-    (``drive.final_depth(z̄0)``): the indenter's contact radius for an indentation depth ≥ 0
-    (Hertz's √(depth) for the paraboloid, the default; Sneddon's for ``lubjax.Sphere``); 0
-    (refine the axis) when the sphere stops short of the surface by less than 50 dr², where the
-    pressure spot, ≈ √(2 z̄) wide, would span fewer than ~10 cells; None otherwise (no contact,
-    nothing thin to resolve), and for a drive that does not know where it ends."""
+    """Edge r̄ of the dry contact the drive ends in, from ``drive.final_depth(z̄0)``: the
+    indenter's contact radius (None: Hertz's) for a depth ≥ 0; 0 (the axis) for a sphere short
+    of the surface by less than 50 dr²; None otherwise or for a drive that does not tell."""
     depth = drive.final_depth(z0)
     if depth is None:
         return None
     if depth >= 0:
-        return (Paraboloid() if indenter is None else indenter).contact_radius(depth)
+        return as_indenter(indenter).contact_radius(depth)
     return 0.0 if -depth < 50.0 * dr**2 else None
 
 
 def _neck_resolvable(beta, t_end, rim_dr) -> bool:
     """Whether the neck a hold ends with (width ≈ h̄_min^{2/3}) is at least a quarter of the
-    refined cell ``rim_dr``. Below that the film inside the contact is thinner than the
-    O(dr²) error of w̄ there and only zigzags from node to node (seen at β = 10⁶ held to t̄ = 10⁶,
-    h̄_min ~ 10⁻⁷): refining then buys no accuracy, only 10× the steps, so it is not done."""
+    refined cell ``rim_dr``; a thinner one is not worth refining."""
     neck = (NECK_CONSTANT / math.sqrt(beta * t_end)) ** (2.0 / 3.0)
     return neck >= 0.25 * rim_dr
 
 
-#: The trapped film's spatial error inside a contact: |Δh̄(0)|/h̄(0) ≈ DIMPLE_ERROR Δr̄_c²/h̄_min
-#: for an interior spacing Δr̄_c, with h̄_min ≈ NECK_CONSTANT/√(β t̄_end) (measured against the
-#: converged references of benchmarks/accuracy.py at z̄0 = 0.5: 1.0e-3 at β = 100, t̄ = 5 and
-#: 3.8 %, 1.6 %, 0.31 % at β = 10³, t̄ = 10³ with Δr̄_c = 0.014, 0.0093, 0.0047; the rule
-#: gives 8.5e-4 and 4.4 %, 2.0 %, 0.49 %).
+#: The trapped film's error |Δh̄(0)|/h̄(0) ≈ DIMPLE_ERROR Δr̄_c²/h̄_min on an interior spacing
+#: Δr̄_c, held to DIMPLE_TARGET × rtol.
 DIMPLE_ERROR = 0.068
-#: ... and the interior is refined until that is at most DIMPLE_TARGET × rtol (0.3 % at the
-#: default rtol, the size of the other errors of the defaults).
 DIMPLE_TARGET = 30.0
 
 
-def _interior_refinement(settings, beta, t_end) -> float:
-    """How much finer than Δr̄ the contact interior needs to be for the trapped film a run ends
-    with: 1 (not at all) for a run that ends before the film under the contact is thin
-    (the default t̄ ≤ 5 run), up to ``Settings.contact_refinement`` for long holds."""
+def _film_refinement(settings, error, target, film, most) -> float:
+    """Δr̄/Δr̄_c, in [1, ``most``], for a film h̄ whose spatial error |Δh̄|/h̄ ≈ error·Δr̄_c²/h̄ on
+    an interior spacing Δr̄_c is to stay below target × rtol: Δr̄ √(error/(target rtol h̄))."""
     dr = mesh_parameters(settings)[0]
+    needed = dr * math.sqrt(error / (target * settings.rtol * film))
+    return min(most, max(1.0, needed))
+
+
+def _interior_refinement(settings, beta, t_end) -> float:
+    """How much finer than Δr̄ the contact interior must be for the trapped film a run ends
+    with: 1 for the default t̄ ≤ 5 run, up to ``Settings.contact_refinement``."""
     h_min = NECK_CONSTANT / math.sqrt(beta * t_end)
-    needed = dr * math.sqrt(DIMPLE_ERROR / (DIMPLE_TARGET * settings.rtol * h_min))
-    return min(settings.contact_refinement, max(1.0, needed))
+    return _film_refinement(settings, DIMPLE_ERROR, DIMPLE_TARGET, h_min,
+                            settings.contact_refinement)
 
 
-#: The late neck's spatial error: |Δh̄_min|/h̄_min ≈ NECK_ERROR (Δr̄_rim/w)^NECK_ORDER for a rim
-#: spacing Δr̄_rim and a neck of width w ≈ h̄_min^{2/3} (measured against the converged
-#: references of benchmarks/accuracy.py: 1.8 % and 0.3 % at β = 10³, t̄ = 10³ with 2.2 and 4.5
-#: cells across the neck; 0.38 % at β = 10³, t̄ = 5 with 4.6 cells). Held to DIMPLE_TARGET × rtol
-#: like the trapped film: ~5 cells across the neck at the default rtol.
+#: The neck's error |Δh̄_min|/h̄_min ≈ NECK_ERROR (Δr̄_rim/w)^NECK_ORDER, w ≈ h̄_min^{2/3} its
+#: width, held to DIMPLE_TARGET × rtol.
 NECK_ERROR = 0.12
 NECK_ORDER = 2.35
 
 
 def _rim_refinement(settings, beta, t_end) -> float:
-    """How much finer than Δr̄ the contact's edge needs to be for the neck a run ends with:
-    ~1 for the default t̄ ≤ 5 run (its neck, h̄_min ≈ 0.011 at β = 100, is 4 cells wide),
-    up to ``Settings.rim_refinement`` for long holds at large β."""
+    """How much finer than Δr̄ the contact's edge must be for the neck a run ends with: ~1 for
+    the default t̄ ≤ 5 run, up to ``Settings.rim_refinement``."""
     dr = mesh_parameters(settings)[0]
     neck = (NECK_CONSTANT / math.sqrt(beta * t_end)) ** (2.0 / 3.0)
     cells = (NECK_ERROR / (DIMPLE_TARGET * settings.rtol)) ** (1.0 / NECK_ORDER)
@@ -339,10 +295,8 @@ def _rim_refinement(settings, beta, t_end) -> float:
 
 
 def _contact_edge(settings, drive, z0, indenter=None) -> float | None:
-    """The edge of the contact a run ends in, where its mesh may be refined: the numeric
-    ``Settings.contact_radius``, or with "auto" :func:`final_contact_radius` of the drive
-    (None without a contact, or at the fine zone's end: there nothing can be refined, the zone
-    must be widened instead); None for ``contact_radius=None``."""
+    """The numeric ``Settings.contact_radius``, or with "auto" :func:`final_contact_radius`
+    (None at the fine zone's end, where only widening the zone would help)."""
     if settings.contact_radius != "auto":
         return settings.contact_radius
     dr = mesh_parameters(settings)[0]
@@ -362,13 +316,10 @@ def _contact_refinement(settings, drive, z0, beta, t_end, indenter=None) -> floa
     return rim
 
 
-#: A collision's thinnest film, h̄_c (:meth:`lubjax.FreeSphere.collision_film`), lies inside the
-#: contact of its rebound depth, radius ā, and its spatial error is
-#: |Δh̄_c|/h̄_c ≈ COLLISION_ERROR ā Δr̄_c²/h̄_c for an interior spacing Δr̄_c (measured against
-#: runs converged in Δr̄_c, benchmarks/drives.py --collision: 4.8 at ε = 10⁻³, St = 50 and 7.1 at
-#: ε = 10⁻⁵, St = 20; the larger is taken).
+#: A collision's thinnest film h̄_c (:meth:`lubjax.FreeSphere.collision_film`), inside its
+#: rebound contact of radius ā, has the error COLLISION_ERROR ā Δr̄_c²/h̄_c, held to
+#: COLLISION_TARGET × rtol.
 COLLISION_ERROR = 7.0
-#: ... held to COLLISION_TARGET × rtol (1 % at the default rtol).
 COLLISION_TARGET = 100.0
 
 
@@ -378,17 +329,13 @@ def _collision_refinement(settings, drive, z0, beta, rim) -> float:
     film = drive.collision_film(float(z0), beta)
     if film is None or rim <= 0:
         return 1.0
-    dr = mesh_parameters(settings)[0]
-    needed = dr * math.sqrt(COLLISION_ERROR * rim / (COLLISION_TARGET * settings.rtol * film))
-    return min(settings.rim_refinement, max(1.0, needed))
+    return _film_refinement(settings, COLLISION_ERROR * rim, COLLISION_TARGET, film,
+                            settings.rim_refinement)
 
 
-#: The near-dry contact's interior spacing, in units of Δr̄ per unit r̄: at most
-#: max(Δr̄/contact_refinement, DRY_CONTACT_SLOPE · Δr̄ · r̄), Δr̄ at r̄ = 1/2 (:func:`mesh_for`).
+#: Near dry the contact's spacing is at most max(Δr̄/contact_refinement, DRY_CONTACT_SLOPE Δr̄ r̄)
+#: and its edge is refined DRY_RIM_REFINEMENT times (at most ``Settings.rim_refinement``).
 DRY_CONTACT_SLOPE = 2.0
-#: ... and its edge refined this much (at most ``Settings.rim_refinement``): the Hertz edge on
-#: plain cells left the held force 1.0e-4 off Hertz's (β = 10⁹, z̄0 = 0.5; a one-off
-#: comparison), 1.3e-5 with ×3 (tests/test_near_dry.py holds it to 1e-4).
 DRY_RIM_REFINEMENT = 3.0
 
 
@@ -397,30 +344,17 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None) -> Mesh:
     (``settings.mesh_parameters()``), refined for the contact the run ends in.
 
     With ``Settings.contact_radius="auto"`` (the default) the edge of the contact the drive
-    ends in (:func:`final_contact_radius`) is refined to what the neck a run ends with needs,
-    and the contact's inside to what the trapped film needs (``NECK_ERROR``,
-    ``DIMPLE_ERROR``): hardly at all for the default t̄ ≤ 5 run, up to ``rim_refinement`` and
-    ``contact_refinement`` for holds to t̄ ~ 10³ at β ≳ 10³. With a number, that radius is
-    refined by the same run-dependent factors; with None, nothing is.
-
-    A free sphere's collision (where its film is held to itself) has the contact of its rebound
-    depth (``FreeSphere.final_depth``) refined inside and at its edge for the collision's
-    thinnest film (``COLLISION_ERROR``, ``COLLISION_TARGET``), up to ``rim_refinement``.
-
-    Where the film inside an indenting contact is held through the force (near dry:
-    ``Settings.film_error`` "auto" from β = ``NEAR_DRY_BETA`` on, or "force";
-    :func:`film_held_by_force`), the mesh is refined for the force instead: the axis to
-    Δr̄/contact_refinement, the spacing growing as ``DRY_CONTACT_SLOPE`` Δr̄ r̄ (a contact of
-    radius a ≤ 1/2 keeps ~a/(2Δr̄), 36 at the default, cells across it, so its force is resolved
-    alike at every size), the edge by ``DRY_RIM_REFINEMENT`` only (the Hertz force, not the
-    film's neck). On 228 nodes instead of the film's 310-344 the force stays within 1e-4 of
-    its peak and 4e-4 pointwise of converged references, in 15-30 % fewer steps (the contact's
-    edge costs a few steps per node it crosses): docs/accuracy.md, benchmarks/near_dry.py.
+    ends in (:func:`final_contact_radius`) is refined for the neck a run ends with, and its
+    inside for the trapped film: hardly at all for the default t̄ ≤ 5 run, up to
+    ``rim_refinement`` and ``contact_refinement`` for long holds at large β. With a number,
+    that radius is refined by the same factors; with None, nothing is. A free sphere's rebound
+    contact is refined for the collision's thinnest film. Near dry
+    (:func:`film_held_by_force`) the mesh serves the force: the axis to
+    Δr̄/contact_refinement, the spacing growing as ``DRY_CONTACT_SLOPE`` Δr̄ r̄, the edge by
+    ``DRY_RIM_REFINEMENT``. docs/design.md, "The mesh rule", gives the numbers.
 
     :func:`lubjax.make_plan`, :func:`lubjax.sweep` and the fits share one mesh across a batch
-    of (β, z̄0): ``settings.mesh()``, refined by the full factors only around a numeric
-    ``Settings.contact_radius``. In long holds to thin films they can therefore differ from
-    ``relax`` (whose mesh follows each run); elsewhere the refinement is ~1 and they agree.
+    (``settings.mesh()``), so in long holds to thin films they can differ from ``relax``.
 
     Args:
         settings: a :class:`lubjax.Settings`.
@@ -452,8 +386,7 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None) -> Mesh:
         if settings.contact_radius == "auto":
             rim = final_contact_radius(drive, float(z0), mesh_parameters(settings)[0], indenter)
         if rim is not None and not film_held_by_force(settings.film_error, beta):
-            # a rebound contact reaching the fine zone's end widens it: its film is thinnest
-            # near the edge there (St = 1000 at ε = 10⁻³: 2.9 % off on the unwidened mesh)
+            # a rebound contact reaching the fine zone's end widens it: its film is thinnest there
             if rim >= 0.95 * settings.r_fine:
                 settings = dataclasses.replace(settings, r_fine=1.25 * rim)
             collision = _collision_refinement(settings, drive, z0, beta, rim)
@@ -462,10 +395,6 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None) -> Mesh:
                              _rim_refinement(settings, beta, t_end))
     rim = _contact_edge(settings, drive, z0, indenter)
     if rim is not None and rim > 0 and film_held_by_force(settings.film_error, beta):
-        # Near dry the film inside the contact is held only through the force, so the mesh is
-        # refined for the force of a contact growing from the axis, not for the film's neck and
-        # dimple: the axis to Δr̄/contact_refinement, the spacing then growing with r̄ (a contact
-        # of radius a keeps ~a/(2Δr̄) cells across it), the edge only for the Hertz force.
         dr = mesh_parameters(settings)[0]
         return settings_mesh(settings, rim, settings.contact_refinement,
                              min(DRY_RIM_REFINEMENT, settings.rim_refinement),

@@ -1,11 +1,7 @@
 """How lubjax's value classes become JAX pytrees: one helper, :func:`register`.
 
-A class names its ``data`` fields (leaves: traced, differentiated, batched) and its ``static``
-fields (part of the tree's structure: a change compiles a new program). Unflattening bypasses
-``__init__``: under ``jit``/``vmap`` the leaves are tracers or placeholders, which the class's
-checks (run when it was built from concrete values, lubjax/_checks.py) must not see.
-(``jax.tree_util.register_dataclass`` calls ``__init__``, so it serves only classes without
-checks.)
+A class names its ``data`` fields (leaves) and its ``static`` ones (structure). Unflattening
+bypasses ``__init__``, whose checks must not see tracers (``register_dataclass`` calls it).
 """
 
 from __future__ import annotations

@@ -19,17 +19,14 @@ from ._mesh import Mesh, mesh_parameters, settings_mesh
 @dataclasses.dataclass(frozen=True)
 class Settings:
     """Accuracy settings. ``rtol`` is *the* accuracy knob: it sets the time-step controller's
-    tolerance and, unless given explicitly, the mesh (``dr``, ``mesh_growth``, ``length``).
-
-    The mesh of a run is :func:`lubjax.mesh_for` (its docstring says which refinement
-    ``make_plan``, ``sweep`` and the fits, whose one mesh serves a whole batch, leave out).
+    tolerance and, unless given explicitly, the mesh (``dr``, ``mesh_growth``, ``length``;
+    a run's mesh is :func:`lubjax.mesh_for`).
 
     Attributes:
         rtol: relative local error tolerance of every step (dimensionless, in [1e-10, 0.1]),
             on the film h̄ at each node, |error| ≤ atol + rtol·|h̄|, on F̄, |error| ≤ 1e-12 +
-            rtol·max(|F̄|, force_floor × peak), and on a free gap z̄ (force control, spring,
-            free sphere), |error| ≤ atol + rtol·max|z̄ - z̄_start|. The global error is a few
-            times rtol (docs/accuracy.md).
+            rtol·max(|F̄|, force_floor × peak), and on a free gap z̄, |error| ≤ atol +
+            rtol·max|z̄ - z̄_start| (docs/accuracy.md gives the global error).
         atol: absolute local error tolerance on h̄ and on a free gap z̄ (units of d_c), in the
             bounds of ``rtol``.
         dr: mesh spacing Δr̄ in the fine zone [0, r_fine] (units of √(R d_c); default: from rtol).
@@ -45,36 +42,23 @@ class Settings:
         max_steps: budget of attempted steps (accepted + rejected, an integer ≥ 10); running
             out is an error.
         force_floor: the force is held to rtol relative to max(|F̄|, force_floor × its peak
-            so far): pointwise down to 1e-8 of the peak by default. Raise it where a tail far
-            below the peak does not matter (fits of noisy data: fitting.FIT_SETTINGS uses 1e-5).
-        film_error: what the film's local error is measured against: "auto" (default),
-            "relative" below β = 10⁵ (``NEAR_DRY_BETA``) and "force" from there on;
-            "relative", the film itself at every node; "force", inside a contact of
-            indentation δ_c the larger of the film and 2δ_c/3 (the film's error then counts
-            through the force it moves). In a near-dry contact (β ≥ 10⁵) the default takes
-            2-8× fewer steps than "relative" for the same force (docs/accuracy.md); the thin
-            films inside the contact (which from β = 10⁶ on the default mesh does not resolve
-            either way) are then less accurate (``Result.unresolved_film()`` says where the error
-            estimate finds them off). The fits keep "relative" (``fitting.FIT_SETTINGS``).
+            so far): pointwise down to 1e-8 of the peak by default (``fitting.FIT_SETTINGS``
+            uses 1e-5: a noisy trace's tail far below the peak does not matter).
+        film_error: what the film's local error is measured against: "relative", the film
+            itself at every node; "force", inside a contact of indentation δ_c the larger of
+            the film and 2δ_c/3 (its error counts through the force it moves: 2-8× fewer steps
+            near dry, the thin films inside less accurate, ``Result.unresolved_film()``);
+            "auto" (default), "relative" below β = ``NEAR_DRY_BETA`` (10⁵), "force" from there.
         error_estimate: also run the nested coarse mesh (every other node) at rtol and at
             8·rtol, and return ``Result.force_error`` (about +55 % run time at the default).
-        contact_radius: refine the mesh around this r̄ (units of √(R d_c); the Hertz contact's
-            edge, where a long hold drains through a thin neck) to what the neck a run ends
-            with needs, at most dr/rim_refinement (``NECK_ERROR``), and inside it to what the
-            trapped film h̄(0) needs, at most dr/contact_refinement (``DIMPLE_ERROR``)
-            (:func:`relax`: hardly any refinement for the default t̄ ≤ 5 run, the full factors
-            for holds to t̄ ~ 10³ at β ≳ 10³); 0 refines the axis (a sphere that just
-            touches); see :func:`lubjax.graded_mesh`. "auto" (default): :func:`relax` takes
-            the edge of the contact the drive ends in, √(travel - z̄0) for a prescribed
-            travel, √δ̄ of Hertz under a load, the axis when the sphere stops within 50 dr² of
-            the surface; none for a spring, a free sphere, no contact, or a neck the refined
-            cell cannot resolve (h̄_min ≈ 0.3/√(β t̄_end) thinner than
-            (dr/(4 rim_refinement))^{3/2}: β t̄_end > 6·10⁹ at the defaults; refining there
-            only multiplied the steps). None: none. A number must lie in [0, r_fine).
+        contact_radius: refine the mesh around this r̄ (units of √(R d_c)), in [0, r_fine), as
+            far as the run's final neck and trapped film need, at most dr/rim_refinement and
+            dr/contact_refinement (0: the axis; :func:`lubjax.mesh_for`). "auto" (default):
+            the edge of the contact the drive ends in, none where there is none or its neck is
+            too thin for the refined cell (β t̄_end > 6·10⁹ at the defaults). None: none.
         rim_refinement: refinement factor at the contact's edge (default 14).
-        contact_refinement: refinement factor inside the contact (default 3). Together, at
-            β = 10³, t̄ = 10³, 14 and 3 bring the late h̄_min to 0.3 % and h̄(0) to 0.5 %; 7 and
-            2 left 1.8 % and 1.3 % (benchmarks/accuracy.py).
+        contact_refinement: refinement factor inside the contact (default 3; with 14, the late
+            h̄_min and h̄(0) to 0.3 % and 0.5 % at β = t̄ = 10³, docs/design.md "The mesh rule").
 
     Raises:
         ValueError: a setting outside its range (the message names it and the range).
@@ -122,8 +106,7 @@ class Settings:
 
     def mesh_parameters(self) -> tuple[float, float, float]:
         """The mesh's numbers, each the setting where given, else the one rtol chooses
-        (docs/model.md, Discretisation: Δr̄ = 0.014 s, growth 1 + 0.15 s with
-        s = (rtol/10⁻⁴)^{1/4}, L̄ = √(100/(3 rtol))).
+        (docs/model.md, Discretisation).
 
         Returns:
             (Δr̄, growth, L̄): the fine zone's spacing and the domain length (units of
@@ -146,8 +129,7 @@ class Settings:
             rim_refinement: refinement factor at it (dimensionless, ≥ 1); None:
                 ``Settings.rim_refinement``. :func:`relax` passes what the run needs.
             contact_slope: inside the contact the spacing may grow to this × r̄ (in (0, 1);
-                None, the default: it stays Δr̄/contact_refinement); see
-                :func:`lubjax.graded_mesh`.
+                None, the default: it stays Δr̄/contact_refinement).
 
         Returns:
             lubjax.Mesh: the mesh.

@@ -1,17 +1,12 @@
 r"""The indenter's shape: the rigid gap profile s(r̄) in h̄ = z̄ + s(r̄) - w̄, and the radius of the
 dry contact a depth presses.
 
-* :class:`Paraboloid` (the default, the paper's): s = r̄²/2, Hertz's contact ā = √δ̄. Exact for
-  a sphere while the depth and the gap are ≪ R (``MAX_TRAVEL_OVER_RADIUS``).
-* :class:`Sphere`: the sphere's true profile, s = (1 - √(1 - ε r̄²))/ε with ε = d_c/R (lengths
-  in the units of eqs 7: r̄ = r/√(R d_c), s in d_c), written r̄²/(1 + √(1 - ε r̄²)) so that it
-  is exact and smooth as ε → 0, where it is the paraboloid. Its dry contact is Sneddon's rigid
-  sphere on the half-space, δ = a artanh(a/R). For deep indentation, δ/R up to ~1
-  (``MAX_SPHERE_TRAVEL_OVER_RADIUS``).
-
-Both use the same elastic half-space (Ŵ, eq 21) and the same Reynolds film: what the sphere
-changes is the rigid gap only. The film stays thin against the contact radius, which is what
-lubrication needs; the paraboloid's own approximation is the one that fails at depth.
+* :class:`Paraboloid` (the default, the paper's): s = r̄²/2, Hertz's contact ā = √δ̄; a sphere
+  while depth and gap are ≪ R (``MAX_TRAVEL_OVER_RADIUS``).
+* :class:`Sphere`: the true profile s = (1 - √(1 - ε r̄²))/ε, ε = d_c/R, written
+  r̄²/(1 + √(1 - ε r̄²)) to stay exact as ε → 0; Sneddon's dry contact δ = a artanh(a/R); for
+  δ/R up to ~1 (``MAX_SPHERE_TRAVEL_OVER_RADIUS``). Only the rigid gap changes (docs/model.md,
+  "The sphere's true profile").
 """
 
 from __future__ import annotations
@@ -75,13 +70,9 @@ class Sphere:
             object.__setattr__(self, "epsilon", float(self.epsilon))
 
     def profile(self, r):
-        """The rigid gap profile, s(r̄) = r̄²/(1 + √(1 - ε r̄²)) up to the equator r̄ = 1/√ε.
-
-        Beyond the equator, r̄ > 1/√ε, there is no sphere above the surface: the gap there is
-        at least R, ≫ any film the contact holds, and carries no pressure. It is continued as
-        the paraboloid's, raised to meet the sphere at the equator (r̄²/2 + 1/(2ε), continuous):
-        a finite gap growing as r̄², the far field the graded mesh and the pressure's
-        squeeze-film weights (lubjax/_influence.py) are built for, rather than an infinite one.
+        """The rigid gap profile, s(r̄) = r̄²/(1 + √(1 - ε r̄²)) up to the equator r̄ = 1/√ε,
+        beyond it r̄²/2 + 1/(2ε) (a gap ≳ R carries no pressure; a finite one growing as r̄²
+        suits the graded mesh and the pressure's weight).
 
         Args:
             r: r̄, radii (units of √(R d_c)); an array (a JAX one under ``jit``).

@@ -1,51 +1,13 @@
 """Split a batch axis over JAX devices with ``jax.sharding`` (shared by ``sweep`` and the fits).
 
-A batch (the (β, z̄0) pairs of a sweep, the traces of a batched fit) is one ``jit`` of a
-batched function: ``lax.map``-ed on CPU, ``vmap``-ed on accelerators (:func:`batching_mode`).
-To run it on several devices the leading axis of the per-member inputs is
-laid out over a one-axis :class:`jax.sharding.Mesh` (``"batch"``) with
-``NamedSharding(mesh, P("batch"))`` and everything the members share (the discretisation, the
-drive, the output times) is replicated (``NamedSharding(mesh, P())``). The call is one
-``jit`` of a ``jax.shard_map`` of the batched function (:func:`over_batch`): one SPMD program
-in which every device runs the one-device program on its slice. No hand-written per-device
-loop; on accelerators the slices run concurrently.
-
-``shard_map`` rather than a plain ``jit`` left to the SPMD partitioner (which also works, and
-was tried first): the partitioner turns the ``vmap``-ed adaptive ``while_loop``'s condition
-(the batch runs until its slowest member is done) into an all-reduce of one boolean per
-iteration, so every device runs until the globally slowest member is done. Under ``shard_map``
-there is no cross-device step at all, each device stops at its own slowest member, and a
-member's result depends only on the members that share its device: a sweep's forces come out
-bit-identical to the one-device sweep. (The fit's forward-mode model compiled this way rounds
-differently from its one-device compilation when a device holds two or more traces, which can
-flip an accept/reject decision at the model's tolerance; tests/test_sharding.py.)
-
-The batch is padded to a multiple of the device count (by repeating the last member; the padded
-rows are cut off again), since a sharded axis must split evenly.
-
-Host devices (CPU, e.g. ``XLA_FLAGS=--xla_force_host_platform_device_count=N``): the devices'
-programs run concurrently on XLA:CPU's one intra-op thread pool, whose size is the number of
-schedulable cores unless the environment variable ``PJRT_NPROC`` (read once, when JAX creates
-its CPU client) says otherwise. In jaxlib 0.10.2 the batched LAPACK kernels (the stepper's LU,
-``lapack_dgetrf_ffi``) split their batch over that same pool and block until the pieces are
-done (``jax::ParallelBatchMap`` → ``BlockingCounter::Wait``). With N device programs on a
-pool of at most N threads every thread ends up waiting for pieces that no free thread can run:
-a deadlock at 0 % CPU (gdb on a hung 2-device sweep on 2 cores: both ``tf_XLAEigen`` threads in
-``BlockingCounter::Wait`` under ``lapack_dgetrf_ffi``). That is why the SPMD version once "hung"
-on forced host devices, and most likely also the "concurrent single-threaded OpenBLAS"
-deadlock of the old per-device loop: OpenBLAS is not involved, ``threadpoolctl`` and
-``--xla_cpu_multi_thread_eigen=false`` change nothing, ``PJRT_NPROC=N+1`` (one thread more than
-device programs) removes it. A per-device batch of one member does not fan out and does not
-hang. :func:`batch_mesh` therefore refuses several host devices on a pool that is too small
-instead of hanging. Accelerators do not run LAPACK on the host pool.
-
-With one device (the default on a plain CPU) :func:`batch_mesh` returns ``None`` and the callers
-run exactly as before: one unsharded ``jit`` call.
-
-Several hosts: after ``jax.distributed.initialize()`` on every process, ``jax.devices()`` lists
-the devices of all hosts and the same mesh spans them: ``jax.device_put`` builds the global
-arrays from host data that every process passes alike, and :func:`to_host` gathers the results
-back to every process. This path was not tested here, for want of a cluster.
+A batch (a sweep's (β, z̄0) pairs, a batched fit's traces) is one ``jit`` of a batched function
+(:func:`batching_mode`). On several devices its leading axis is laid out over a one-axis
+:class:`jax.sharding.Mesh` (``"batch"``), padded to a multiple of the device count, the shared
+inputs replicated, and the call is one ``jit`` of a ``jax.shard_map`` (:func:`over_batch`).
+With one device :func:`batch_mesh` returns None: one unsharded call. Several CPU host devices
+need ``PJRT_NPROC`` above the device count, else jaxlib's batched LAPACK kernels deadlock on
+XLA:CPU's pool (docs/guide/sweeps.md, "Several devices"): :func:`batch_mesh` refuses them.
+Several hosts (``jax.distributed.initialize()``) share one mesh; untested on a cluster.
 """
 
 from __future__ import annotations
@@ -104,15 +66,8 @@ BATCHING = ("auto", "map", "vmap")
 
 
 def batching_mode(batching: str = "auto") -> str:
-    """``"map"`` or ``"vmap"`` for ``batching`` (see :data:`BATCHING`).
-
-    Why not vmap on CPU: every member of a vmap-ed adaptive ``while_loop`` runs until the
-    batch's slowest member is done, and every ``lax.cond`` in the step (accept/reject,
-    restarts) becomes a select that computes both branches; on CPU the batched LU gains nothing
-    from the batch (it is a loop of LAPACK calls). A sequential ``lax.map`` lets each member take
-    its own steps (and a fit skip the traces whose fit has ended). An accelerator is the other
-    way round: there the batch is what fills the device.
-    """
+    """``"map"`` or ``"vmap"`` for ``batching`` (see :data:`BATCHING`; docs/design.md,
+    "Differentiation and batching", says why CPU maps)."""
     if batching not in BATCHING:
         raise ValueError(f"batching must be one of {', '.join(BATCHING)}, got {batching!r}")
     if batching == "auto":
@@ -141,12 +96,7 @@ def over_batch(fn, mesh: Mesh | None, batched: tuple[bool, ...]):
     """``fn`` (a batched function of positional arguments, batched where ``batched`` says)
     as one SPMD function over the mesh: each device applies ``fn`` to its slice of the batch
     and the replicated rest (``jax.shard_map``), every output split along its leading axis.
-    Unchanged without a mesh. Wrap the result in ``jax.jit``.
-
-    ``shard_map`` rather than letting the partitioner split a plain ``jit``: each device then
-    runs exactly the single-device program on its slice (no cross-device step inside, not even
-    the all-reduce of the ``while_loop``'s condition, so a device stops at its own slowest
-    member), and a member's result depends only on the members that share its device."""
+    Unchanged without a mesh. Wrap the result in ``jax.jit``."""
     if mesh is None:
         return fn
     specs = tuple(P(AXIS) if b else P() for b in batched)
@@ -183,8 +133,7 @@ def replicated(mesh: Mesh) -> NamedSharding:
 
 
 def _put(tree, sharding):
-    # From host data, device_put also builds arrays that span several processes (each must pass
-    # the same values; the inputs here are small and built identically everywhere).
+    # From host data alike on every process, device_put also builds multi-process arrays.
     return jax.device_put(tree, sharding)
 
 

@@ -1,16 +1,11 @@
 r"""Substrates: how the surface deflects under the film pressure. A scene picks exactly one.
 
-The stepper sees a substrate through two things only:
+The stepper sees a substrate through its **influence matrix** Ŵ (w̄ = -Ŵ ū for an elastic
+"load" ū; :class:`HalfSpace`, eqs 8b, 21, or :class:`Layer`) and its **creep compliance** in
+units of 1/E*∞, J(t̄) = J₀ + Σ_k J_k (1 - e^{-t̄/λ_k}), J₀ + Σ J_k = 1 (elastic: J ≡ 1).
 
-* its **influence matrix** Ŵ (w̄ = -Ŵ ū for an elastic "load" ū), built once per mesh in numpy
-  and cached: :class:`HalfSpace` (the default, eqs 8b, 21) or :class:`Layer` (a layer of
-  thickness H̄ = H/√(R d_c) on a rigid base, bonded or frictionless; ``lubjax._layer``);
-* its **creep compliance** J(t̄) in units of the relaxed compliance 1/E*, as a generalised
-  Kelvin (Prony) series J(t̄) = J₀ + Σ_k J_k (1 - e^{-t̄/λ_k}), J₀ + Σ J_k = 1. An elastic
-  substrate has J ≡ J₀ = 1 and no terms.
-
-Viscoelasticity by the correspondence principle (constant ν): the elastic load is the
-convolution ū(t̄) = ∫ J(t̄ - s) dp̄(s) = J₀ p̄ + Σ_k q_k with internal variables
+By the correspondence principle (constant ν) the elastic load is ū(t̄) = ∫ J(t̄ - s) dp̄(s) =
+J₀ p̄ + Σ_k q_k with internal variables
 
     dq_k/dt̄ = (J_k p̄ - q_k)/λ_k,                                     (V)
 
@@ -20,10 +15,8 @@ a₀q_kⁿ⁺¹ + a₁q_kⁿ + a₂q_kⁿ⁻¹ = Δt̄ (J_k p̄ⁿ⁺¹ - q_kⁿ
     ūⁿ⁺¹ = c p̄ⁿ⁺¹ + Σ_k (-a₁q_kⁿ - a₂q_kⁿ⁻¹)/(a₀ + Δt̄/λ_k),
     c = J₀ + Σ_k (Δt̄J_k/λ_k)/(a₀ + Δt̄/λ_k),
 
-so every step is still one linear solve (the elastic block scaled by c); an elastic substrate
-gives c = 1 and ū = p̄ exactly, the elastic arithmetic. Dimensionless numbers use the
-*relaxed* modulus E*∞ (β, p̄, F̄ of eqs 7-8 with E* = E*∞): the relaxed limit (λ → 0) is the
-elastic solver at E*∞, the instantaneous one (λ → ∞) the elastic solver at E*₀ = E*∞/J₀.
+so every step is still one linear solve (elastic: c = 1, ū = p̄ exactly). β, p̄, F̄ use the
+relaxed modulus E*∞; λ → ∞ is the elastic solver at E*₀ = E*∞/J₀.
 """
 
 from __future__ import annotations
@@ -92,10 +85,8 @@ class HalfSpace:
 
 @dataclasses.dataclass(frozen=True)
 class Layer:
-    """An elastic layer of dimensionless thickness H̄ = H/√(R d_c) on a rigid base.
-
-    In Hankel space it deflects as the half-space times a transfer function C(kH)
-    (docs/model.md, Substrates).
+    """An elastic layer of dimensionless thickness H̄ = H/√(R d_c) on a rigid base, deflecting
+    as the half-space times a transfer function C(kH) (docs/model.md, Substrates).
 
     Args:
         thickness: H̄ = H/√(R d_c), dimensionless, > 0 (``lubjax.layer_thickness_bar(H, R,
@@ -181,8 +172,7 @@ def _history_sum(weights, levels):
 
 
 def _elastic_step_loads(step) -> StepLoads:
-    """ū = p̄: no memory (K = 0), and no zero memory terms added (they would change the
-    rounding, and fits' convergence with it)."""
+    """ū = p̄: no memory, and no zero memory terms added (they would change the rounding)."""
     memory = step.history.memory[0]
     return StepLoads(None, _history_sum(step.weights, step.history.elastic_load),
                      lambda p: (memory, p))
@@ -190,11 +180,9 @@ def _elastic_step_loads(step) -> StepLoads:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Viscoelastic:
-    """A linear viscoelastic substrate: ``elastic`` (HalfSpace or Layer) gives the geometry, a
-    creep compliance in Kelvin-Prony form the time dependence (see the module docstring).
-
-    Build it from the modulus with :meth:`standard_linear_solid` (one term) or
-    :meth:`from_prony` (several). Fields (pytree leaves: differentiable and batchable):
+    """A linear viscoelastic substrate: the geometry of ``elastic``, the time dependence of a
+    Kelvin-Prony creep compliance (module docstring); from the modulus by
+    :meth:`standard_linear_solid` or :meth:`from_prony`. The numbers are pytree leaves.
 
     Args:
         retardation: J_k, in units of the relaxed compliance 1/E*∞, each ≥ 0: the compliance
@@ -231,10 +219,8 @@ class Viscoelastic:
 
     @classmethod
     def standard_linear_solid(cls, stiffening, relaxation_time, elastic=None):
-        """A standard linear solid: one term, E(t) = E∞ + (E₀ - E∞) e^{-t/τ}.
-
-        Its compliance creeps with λ = τ E₀/E∞ from 1/E₀ to 1/E∞: J₁ = 1 - E∞/E₀.
-        Differentiable in both numbers (closed form).
+        """A standard linear solid, E(t) = E∞ + (E₀ - E∞) e^{-t/τ}: one term, λ = τ E₀/E∞,
+        J₁ = 1 - E∞/E₀ (closed form: differentiable in both numbers).
 
         Args:
             stiffening: E₀/E∞, dimensionless, > 1 (may be traced).
@@ -265,10 +251,7 @@ class Viscoelastic:
     @classmethod
     def from_prony(cls, moduli, times, elastic=None):
         """A relaxation modulus E(t)/E∞ = 1 + Σ_k g_k e^{-t/τ_k} converted exactly to the
-        compliance form.
-
-        The retardation rates are the roots of s Ē(s) (interlaced with the 1/τ_k), the weights
-        its residues. numpy, not traced: use :meth:`standard_linear_solid` to fit one term.
+        compliance form: rates the roots of s Ē(s), weights its residues (numpy, not traced).
 
         Args:
             moduli: g_k, dimensionless, each > 0.
@@ -298,8 +281,7 @@ class Viscoelastic:
         def s_modulus(s):  # s Ē(s)/E∞ = 1 + Σ g s/(s + 1/τ), evaluated at s = -x
             return 1.0 + np.sum(g * (-s) / (-s + poles))
 
-        # Roots x of 1 + Σ g (-x)/(1/τ - x): one in each interval between consecutive poles,
-        # the first in (0, 1/τ_1).
+        # One root x of 1 + Σ g (-x)/(1/τ - x) between consecutive poles, the first in (0, 1/τ_1).
         edges = np.concatenate([[0.0], poles])
         rates = []
         for lo, hi in zip(edges[:-1], edges[1:]):
@@ -336,10 +318,7 @@ class Viscoelastic:
         return 1.0 - jnp.sum(ret), ret, jnp.asarray(self.times)
 
     def step_loads(self, step) -> StepLoads:
-        """The step's elastic load: (V) by the step's BDF formula.
-
-        qⁿ⁺¹ = (Δt̄J_k p̄ⁿ⁺¹/λ_k - Σ_{j≥1} a_j q^{n+1-j})/(a₀ + Δt̄/λ_k), so
-        ūⁿ⁺¹ = J₀p̄ⁿ⁺¹ + Σ_k q_kⁿ⁺¹ is linear in p̄ⁿ⁺¹ (module docstring).
+        """The step's elastic load: (V) by the step's BDF formula (module docstring).
 
         Args:
             step: the step being taken (``lubjax._stepper.StepRecord``).
@@ -352,8 +331,7 @@ class Viscoelastic:
         a0, dt = step.weights[0], step.dt
         denom = a0 + dt / lam
         creep = dt * jk / lam / denom
-        # (each sum in this order: the compiler's fused multiply-adds follow it, and the
-        # rounding fixes the step sequence)
+        # each sum in this order: its rounding fixes the step sequence
         _, a1, a2, a3 = step.weights
         memory, load = step.history.memory, step.history.elastic_load
         history_memory = -a1 * memory[0] - a2 * memory[1]

@@ -1,12 +1,8 @@
 """Keep the CPU's BLAS/LAPACK single-threaded around the solver's small dense solves.
 
-On CPU, JAX's ``linalg.solve`` calls the LAPACK that scipy ships (OpenBLAS). For the solver's
-(N-1)×(N-1) systems (N ≈ 200-300) threading gains nothing, and when other processes load the
-machine OpenBLAS's spinning threads oversubscribe the cores: the default run then swings from
-0.15 s to tens of seconds (issue "Error control", item 8).
-``threadpoolctl`` (maintained by the scikit-learn developers) limits the threads of the BLAS
-libraries already loaded in this process, for the duration of a call, and restores them after.
-``LUBJAX_BLAS_LIMIT=0`` leaves BLAS's own thread count alone (to measure what the limit buys).
+For (N-1)×(N-1) systems, N ≈ 200-300, threads gain nothing and under load oversubscribe the
+cores (docs/design.md, "Numerical hygiene"); ``threadpoolctl`` limits them for a call.
+``LUBJAX_BLAS_LIMIT=0`` leaves BLAS's own thread count alone.
 """
 
 from __future__ import annotations

@@ -34,8 +34,7 @@ def si_scales(E_star, radius, d_c, *, t_c=None, speed=None, viscosity=None) -> d
     Returns:
         dict: ``time_s`` (t = t_c t̄), ``length_m`` (r = √(R d_c) r̄), ``gap_m`` (d_c),
         ``pressure_Pa`` ((2E*/π) √(d_c/R), eq 7), ``force_N`` (F_s = 2E* d_c^{3/2} √R/π,
-        eq 11b) and, with a ``viscosity``, ``beta`` = E* d_c^{5/2}/(6π η v R^{3/2}) (eq 8e),
-        written with whichever of ``t_c`` and ``speed`` was given, so it rounds as written.
+        eq 11b) and, with a ``viscosity``, ``beta`` = E* d_c^{5/2}/(6π η v R^{3/2}) (eq 8e).
 
     Raises:
         ValueError: neither or both of ``t_c`` and ``speed``.
@@ -58,8 +57,7 @@ def si_scales(E_star, radius, d_c, *, t_c=None, speed=None, viscosity=None) -> d
 
 
 def modulus_for_beta(beta, radius, d_c, *, speed, viscosity) -> float:
-    """The modulus E* at which a scene has a given β: eq 8e solved for E*,
-    E* = 6π β η v R^{3/2}/d_c^{5/2} (the inverse of :func:`si_scales`' ``beta``).
+    """Eq 8e solved for the modulus: E* = 6π β η v R^{3/2}/d_c^{5/2}.
 
     Args:
         beta: β, dimensionless (eq 8e).
@@ -151,15 +149,13 @@ def reduced_radius(R1: float, R2: float = math.inf) -> float:
 
 
 class _Scene:
-    """What every SI scene derives from :func:`si_scales` (its own ``_si_scales()``), and the
-    indenter's shape its ``indenter`` names."""
+    """What every SI scene derives from its ``_si_scales()`` (:func:`si_scales`)."""
 
     def _si_scales(self) -> dict:
         raise NotImplementedError
 
     def _check_indenter(self, **lengths) -> None:
-        """The ``indenter`` a choice, and each of ``lengths`` (name: metres, a travel or gap)
-        within its limit (``lubjax._checks.travel_over_radius_problem``)."""
+        """Check ``indenter`` and each of ``lengths`` (name: metres) against its limit."""
         check_choice("indenter", self.indenter, INDENTERS)
         for name, value in lengths.items():
             problem = travel_over_radius_problem(name, value, self.radius, self.indenter,
@@ -303,13 +299,10 @@ class CreepTest(_Scene):
         load: F, the held load [N].
         ramp_time: the load's ramp time t_c [s].
         gap: z0, the initial gap [m].
-        indenter: "paraboloid" (default) or "sphere" (``shape``; d_c stays Hertz's δ∞, a
-            scale: the sphere's own indentation under the load is deeper).
+        indenter: "paraboloid" (default) or "sphere" (``shape``; d_c stays Hertz's δ∞).
 
-    Scales (docs/model.md, "Drives"): d_c = δ∞, Hertz's indentation under the load, and
-    t_c = ``ramp_time``, so that the dimensionless load plateau is F̄ = 2π/3 and the gap tends to
-    z̄ = -1 (the approach z0 + δ∞). β = E* d_c^{3/2} t_c/(6π η R^{3/2}) keeps the meaning of eq 8e
-    with the speed d_c/t_c.
+    Scales: d_c = δ∞, Hertz's indentation under the load, and t_c = ``ramp_time``: the load's
+    plateau is F̄ = 2π/3, the gap tends to z̄ = -1, β = E* d_c^{3/2} t_c/(6π η R^{3/2}).
     """
 
     E_star: float
@@ -376,14 +369,11 @@ class CreepTest(_Scene):
 
 @dataclasses.dataclass(frozen=True)
 class Collision(_Scene):
-    """A free sphere approaching a wall through the film (Davis, Serayssol & Hinch 1986):
-    mass ``mass``, speed ``speed`` toward the wall at the gap ``gap``, optionally pushed by a
-    constant ``weight`` (its weight less buoyancy, N).
+    """A free sphere approaching a wall through the film (Davis, Serayssol & Hinch 1986).
 
-    Scales: d_c = ``gap`` (x0) and t_c = x0/V, so the sphere starts at z̄ = 1 with v̄ = -1.
-    Numbers: β = E* x0^{5/2}/(6π η V R^{3/2}); Stokes St = m V/(6π η R²); the inverse mass of
-    :class:`lubjax.FreeSphere`, G = 2β/(π St); W̄ = W/F_s. Davis et al.'s elasticity parameter
-    ε = 4θηVR^{3/2}/x0^{5/2} with θ = 1/(πE*) (their eq 2.6 as we read it) is 2/(3π²β).
+    Scales: d_c = x0 and t_c = x0/V (z̄ = 1, v̄ = -1 at the start); β = E* x0^{5/2}/(6π η V
+    R^{3/2}), St = m V/(6π η R²), G = 2β/(π St), W̄ = W/F_s, and Davis et al.'s
+    ε = 4θηVR^{3/2}/x0^{5/2}, θ = 1/(πE*) (their eq 2.6), is 2/(3π²β).
 
     Attributes:
         E_star: E*, plane-strain (or reduced, eq 24) modulus [Pa].
@@ -441,8 +431,7 @@ class Collision(_Scene):
         """The drive :func:`lubjax.relax` takes for this collision.
 
         Returns:
-            lubjax.FreeSphere: inverse mass G = 2β/(π St), starting velocity
-            v̄ = -1, load W̄ = W/F_s.
+            lubjax.FreeSphere: G = 2β/(π St), v̄0 = -1, W̄ = W/F_s.
         """
         from ._drives import FreeSphere
 

@@ -8,20 +8,8 @@ A run is three calls::
     force = evaluate(traj.steps, times, "force")        # the stepper's interpolant, traceable
 
 ``rollout`` is a pure function of its arguments (``jit``, ``vmap``, ``jvp``/``jacfwd``,
-``vjp``/``jax.grad``). The mesh a run of :func:`lubjax.relax` gets is
-:func:`lubjax.mesh_for`; ``Settings.mesh()`` and ``Settings.tolerance()`` give the shared mesh and
-the tolerance of a :class:`lubjax.Settings`.
-
-Contents:
-
-* the loop: :func:`rollout`, its :class:`State`, one output entry per attempt :class:`Entry`, the
-  whole :class:`Trajectory`, :func:`evaluate` (a field at any times) and the controller's
-  :class:`Tolerance`;
-* the discretisation: :class:`Discretisation`, :func:`discretise`, :func:`film_thickness`
-  (h̄ = z̄ + r̄²/2 - w̄), :func:`displacement` (w̄ = -Ŵp̄);
-* the elastic kernels: :func:`kernel`, :func:`influence_matrix` (half-space),
-  :func:`layer_influence_matrix` (a layer on a rigid base), :func:`force_weights`
-  (F̄ = c·p̄, eq 11b).
+``vjp``/``jax.grad``). ``Settings.mesh()`` and ``Settings.tolerance()`` give the shared mesh
+and the tolerance of a :class:`lubjax.Settings` (``relax``'s own mesh: :func:`lubjax.mesh_for`).
 """
 
 from ._controller import Status, Tolerance, stop_reason

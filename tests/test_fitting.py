@@ -383,6 +383,39 @@ def test_lm_ends_rough_costs_by_the_decrement():
     assert verdicts == {True, False}
 
 
+def test_lbfgs_steps_check_convergence_every_fifth_iteration_and_stop_on_a_non_finite_loss():
+    """L-BFGS's init/step/terminate on a stand-in problem: the decrement is looked at (one model
+    run) only every fifth iteration, a small one converges, and a non-finite loss ends the
+    problem at once, not converged."""
+    from fitting import _optimisers
+
+    runs = []
+
+    def run(x):
+        runs.append(x)
+        return np.array([1e-3, 0.0, 1.0]), np.eye(3)[:, :2], True  # r almost ⟂ J: converged
+
+    def iterate(losses):
+        values = iter(losses)
+        return lambda x, opt_state: (x - 1.0, opt_state, next(values))
+
+    x0 = np.array([3.0, 3.0])
+    problem = _optimisers.LBFGSProblem(iterate([10.0] * 5), run, 3)
+    state = _optimisers.lbfgs_init(x0, max_iter=60)
+    for it in range(1, 6):
+        state = _optimisers.lbfgs_terminate(problem, _optimisers.lbfgs_step(problem, state))
+        assert state.iterations == it and state.done == (it == 5)
+    assert state.converged and len(runs) == 1 and "converged" in state.message
+    np.testing.assert_array_equal(state.x, x0 - 5.0)
+
+    problem = problem._replace(iterate=iterate([10.0, math.inf]))
+    state = _optimisers.lbfgs_init(x0, max_iter=60)
+    for _ in range(2):
+        state = _optimisers.lbfgs_terminate(problem, _optimisers.lbfgs_step(problem, state))
+    assert state.done and not state.converged and "non-finite" in state.message
+    assert state.iterations == 2
+
+
 @pytest.mark.slow
 def test_near_dry_trace_gives_e_star_and_z0_and_leaves_the_viscosity_open():
     """data/water_dc140.csv: PDMS under water, β = 5.4·10⁶, z̄0 = 0.5, made on a 2× finer mesh
