@@ -61,7 +61,9 @@ def error_estimate(value, coarse, loose):
     total = SAFETY_FACTOR * (space + time_)
     padded = np.pad(total, ESTIMATE_WINDOW, mode="edge")
     n = total.size
-    return np.max([padded[k:k + n] for k in range(2 * ESTIMATE_WINDOW + 1)], axis=0)
+    # (fmax: the NaN of times the coarse runs did not reach stays there, not spread before it)
+    spread = np.fmax.reduce([padded[k:k + n] for k in range(2 * ESTIMATE_WINDOW + 1)], axis=0)
+    return np.where(np.isnan(total), np.nan, spread)
 
 
 def errors_of(series, trajs) -> dict:

@@ -232,3 +232,22 @@ def test_the_profile_interpolant_can_dip_below_its_nodes_so_its_film_is_checked(
     assert not bad.ok
     assert bad.problems() == [f"the film profile at t̄ = 1 goes negative (h̄ = -0.0001 at "
                               f"r̄ = {res.r[3]:.4g})"]
+
+
+def test_error_estimate_runs_that_stop_early_say_from_when_their_errors_are_nan(monkeypatch):
+    # The coarse runs of the estimate given a budget too small (the main run keeps its own):
+    # relax warns, naming the time they stopped, and the errors after it are NaN, not stale.
+    import lubjax._solve as solve
+
+    def short_budget(mesh, substrate, indenter, tol, ptimes):
+        runs = lubjax._estimate.estimate_runs(mesh, substrate, indenter, tol, ptimes)
+        return [(d, dataclasses.replace(t, max_steps=120), p) for d, t, p in runs]
+
+    monkeypatch.setattr(solve, "estimate_runs", short_budget)
+    with pytest.warns(RuntimeWarning, match=r"coarse runs stopped at t̄ = ") as caught:
+        res = lubjax.relax(100.0, 0.5, 5.0)
+    assert res.ok
+    t_stop = float(str(caught[0].message).split("t̄ = ")[1].split(" ")[0])
+    assert 0 < t_stop < 5.0
+    assert np.all(np.isfinite(res.force_error[res.t < t_stop * (1 - 1e-3)]))
+    assert np.all(np.isnan(res.force_error[res.t > t_stop * (1 + 1e-3)]))

@@ -193,19 +193,16 @@ def test_unresolved_film_is_flagged_at_beta_1e9(beta_1e9):
 
 
 @pytest.mark.slow
-def test_error_estimate_covers_the_run_at_beta_1e9_or_says_where_it_stops(beta_1e9):
-    """With the default (the force norm there) the estimate's coarse runs reach t_end at
-    β = 10⁹; with the relative one they spend their step budget on the ramp, and relax says
-    from when its errors are NaN (a warning naming the time) instead of returning them
-    quietly."""
+def test_error_estimate_covers_the_run_at_beta_1e9_with_either_film_norm(beta_1e9):
+    """The estimate's coarse runs reach t_end at β = 10⁹ with the default (the force norm
+    there) and with the relative one, whose steps resolve the film (they spent their budget on
+    the ramp while the midpoint film of the conductance could go negative inside the contact);
+    the relative run's estimated force error stays within a few rtol of the peak."""
     res = beta_1e9
     assert np.all(np.isfinite(res.force_error)) and np.all(np.isfinite(res.film_min_error))
-    with pytest.warns(RuntimeWarning, match=r"coarse runs stopped at t̄ = 0\.[5-8]") as caught:
-        rel = lubjax.relax(1e9, Z0, 0.8, settings=lubjax.Settings(film_error="relative"))
-    assert rel.ok
-    t_stop = float(str(caught[0].message).split("t̄ = ")[1].split(" ")[0])
-    assert np.all(np.isfinite(rel.force_error[rel.t < t_stop - 1e-3]))  # (t̄ printed to 4 digits)
-    assert np.all(np.isnan(rel.force_error[rel.t > t_stop + 1e-3]))
+    rel = lubjax.relax(1e9, Z0, 0.8, settings=lubjax.Settings(film_error="relative"))
+    assert rel.ok and np.all(np.isfinite(rel.force_error))
+    assert np.max(rel.force_error) < 1e-3 * np.max(np.abs(rel.force))
 
 
 # ---------------------------------------------------------------- derivatives near dry
