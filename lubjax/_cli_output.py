@@ -130,10 +130,11 @@ def relax_summary(res, test=None) -> str:
 def creep_summary(res, test) -> str:
     """The line ``lubjax creep`` prints (SI): the approach and the film at the end."""
     d = test.indent
+    dry = "Sneddon" if test.indenter == "sphere" else "Hertz"
     return (
         f"creep: beta={test.beta:.4g} z0={test.z0_bar:.4g} (d_c = Hertz indentation "
         f"{d:.4g} m, t_c = {test.time_scale:.4g} s): approach at the end "
-        f"{test.gap - res.gap[-1] * d:.5g} m (Hertz: {test.gap + d:.5g} m), "
+        f"{test.gap - res.gap[-1] * d:.5g} m ({dry}: {test.gap + test.dry_depth:.5g} m), "
         f"film h(0) {res.film_center[-1] * d:.3g} m; {res.accepted} steps, run {res.run_s:.3f} s,"
         f" compile {res.compile_s:.2f} s"
     )

@@ -36,6 +36,7 @@ import numpy as np
 from ._checks import check_number
 from ._indenter import RampHold
 from ._pytree import register
+from ._shape import Paraboloid
 
 #: A collision's thinnest film over its scale z̄0 ε^{2/5} (:meth:`FreeSphere.collision_film`;
 #: benchmarks/drives.py measures it).
@@ -205,8 +206,11 @@ class Load(_Drive):
         Returns:
             δ̄ = (3F̄/(2π))^{2/3} (units of d_c).
         """
-        final = float(np.asarray(self.load(np.asarray([1e300])))[0])
-        return (3.0 * final / (2.0 * math.pi)) ** (2.0 / 3.0)
+        return Paraboloid().depth_under_load(self.final_load())
+
+    def final_load(self) -> float:
+        """The load the history ends at, F̄(∞) (units of F_s)."""
+        return float(np.asarray(self.load(np.asarray([1e300])))[0])
 
     def row(self, step):
         """The closing row: α = 1, s = 0, b = F̄(tⁿ⁺¹).

@@ -242,7 +242,10 @@ def final_contact_radius(drive, z0, dr, indenter=None) -> float | None:
     """Edge r̄ of the dry contact the drive ends in, from ``drive.final_depth(z̄0)``: the
     indenter's contact radius (None: Hertz's) for a depth ≥ 0; 0 (the axis) for a sphere short
     of the surface by less than 50 dr²; None otherwise or for a drive that does not tell."""
-    depth = drive.final_depth(z0)
+    final_load = getattr(drive, "final_load", None)
+    # (a prescribed load sets the depth through the indenter's shape: Sneddon's under a sphere)
+    depth = (as_indenter(indenter).depth_under_load(final_load()) if final_load is not None
+             else drive.final_depth(z0))
     if depth is None:
         return None
     if depth >= 0:

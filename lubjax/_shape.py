@@ -48,6 +48,17 @@ class Paraboloid:
         """
         return math.sqrt(depth)
 
+    def depth_under_load(self, load: float) -> float:
+        """Hertz's dry indentation under a load.
+
+        Args:
+            load: F̄ ≥ 0 (units of F_s).
+
+        Returns:
+            δ̄ = (3F̄/(2π))^{2/3} (units of d_c).
+        """
+        return (3.0 * max(load, 0.0) / (2.0 * math.pi)) ** (2.0 / 3.0)
+
 
 @dataclasses.dataclass(frozen=True)
 class Sphere:
@@ -103,6 +114,22 @@ class Sphere:
             return math.sqrt(max(depth, 0.0))
         x = brentq(lambda x: x * math.atanh(x) - target, 0.0, 1.0 - 1e-15, xtol=1e-15)
         return x / math.sqrt(self.epsilon)
+
+    def depth_under_load(self, load: float) -> float:
+        """Sneddon's dry indentation under a load: F̄ = (π/2) ε^{-3/2} F/(E* R²) with F/(E* R²)
+        of :func:`sneddon_sphere` (F_s = (2/π) E* √R d_c^{3/2}), solved for a/R.
+
+        Args:
+            load: F̄ ≥ 0 (units of F_s).
+
+        Returns:
+            δ̄ (units of d_c); → Hertz's (3F̄/(2π))^{2/3} as ε → 0, deeper at finite ε.
+        """
+        if self.epsilon <= 0.0 or load <= 0.0:
+            return Paraboloid().depth_under_load(load)
+        target = load * self.epsilon**1.5 * 2.0 / math.pi
+        x = brentq(lambda x: float(sneddon_sphere(x)[1]) - target, 0.0, 1.0 - 1e-12, xtol=1e-15)
+        return float(sneddon_sphere(x)[0]) / self.epsilon
 
 
 def as_indenter(indenter):

@@ -333,6 +333,12 @@ class CreepTest(_Scene):
         return hertz_indentation(self.E_star, self.radius, self.load)
 
     @property
+    def dry_depth(self) -> float:
+        """The dry indentation under the load [m]: Hertz's δ∞ for the paraboloid, Sneddon's
+        (a little deeper: 1.4 % at δ∞ = 0.2 R) for the sphere."""
+        return self.indent * self.shape.depth_under_load(2.0 * math.pi / 3.0)
+
+    @property
     def time_scale(self) -> float:
         """t_c = ``ramp_time`` [s]: t = t_c t̄."""
         return self.ramp_time

@@ -87,6 +87,24 @@ def test_the_mesh_rule_refines_sneddons_contact_edge():
     assert Sphere(1e-9).contact_radius(0.9) == pytest.approx(np.sqrt(0.9), rel=1e-9)
 
 
+def test_a_load_on_the_sphere_sinks_to_sneddons_depth_and_the_mesh_follows():
+    """Under a load the sphere's dry depth is Sneddon's (deeper than Hertz's, 2 % at
+    δ∞ = 0.3 R): depth_under_load inverts sneddon_sphere, the mesh refines that contact's edge,
+    and a near-dry creep ends there to 3e-4 where Hertz's depth is 2 % off."""
+    eps, load = 0.3, 2.0 * np.pi / 3.0  # the Load's plateau: Hertz's depth 1
+    sphere = Sphere(eps)
+    depth = sphere.depth_under_load(load)
+    x = sphere.contact_radius(depth) * np.sqrt(eps)
+    assert sneddon_sphere(x)[1] * np.pi / 2 / eps**1.5 == pytest.approx(load, rel=1e-10)
+    assert lubjax.Paraboloid().depth_under_load(load) == pytest.approx(1.0, rel=1e-14)
+    assert Sphere(1e-9).depth_under_load(load) == pytest.approx(1.0, rel=1e-6)
+    edge = final_contact_radius(lubjax.Load(), 0.5, 0.014, sphere)
+    assert edge == pytest.approx(sphere.contact_radius(depth), rel=1e-12)
+    res = lubjax.relax(1e6, 0.5, 5.0, drive=lubjax.Load(), indenter=sphere)
+    assert -res.gap[-1] == pytest.approx(depth, rel=3e-4)
+    assert abs(depth - 1.0) > 50 * abs(-res.gap[-1] / depth - 1)
+
+
 @pytest.mark.parametrize("eps, z0", [(0.1, 0.05), (0.35, 0.1), (0.6, 0.1), (0.95, 0.05)])
 def test_near_dry_hold_is_sneddons_sphere(eps, z0):
     res = lubjax.relax(DRY_BETA, z0, DRY_T, settings=FAST, indenter=Sphere(eps))
@@ -181,6 +199,21 @@ def test_sphere_derivatives_and_batches_in_epsilon():
                        indenter=Sphere(0.3)).at([1.0])[0]
     assert float(batch[1]) == pytest.approx(float(one), rel=1e-9)
     assert float(batch[0]) > float(batch[1])
+
+
+def test_creep_with_the_sphere_compares_with_sneddons_depth(capsys):
+    E, R, F, gap = 20e3, 10e-6, 2e-7, 0.5e-6
+    args = ["creep", "--E-star", str(E), "--viscosity", "1", "--radius", str(R), "--load",
+            str(F), "--ramp-time", "1", "--hold", "1", "--gap", str(gap), "--rtol", "1e-3"]
+    # Sneddon's depth in SI: F = E* R² f(a/R), δ = R g(a/R)
+    x = brentq(lambda x: sneddon_sphere(x)[1] - F / (E * R**2), 1e-9, 1 - 1e-12, xtol=1e-15)
+    sneddon = R * float(sneddon_sphere(x)[0])
+    hertz = (3 * F / (4 * E * np.sqrt(R))) ** (2 / 3)
+    assert lubjax_main(args + ["--indenter", "sphere"]) == 0
+    assert f"(Sneddon: {gap + sneddon:.5g} m)" in capsys.readouterr().out
+    assert lubjax_main(args) == 0
+    assert f"(Hertz: {gap + hertz:.5g} m)" in capsys.readouterr().out
+    assert sneddon > 1.01 * hertz
 
 
 def test_sphere_validity_and_the_paraboloids_message(capsys):
