@@ -2,15 +2,13 @@
 several programs of one call compiled side by side.
 
 A solver program is one ``while_loop`` whose body (an attempted step) XLA splits into ~90 small
-loop fusions; on CPU each becomes a kernel of its own, and generating them is most of the
-compile time. XLA's newer MLIR fusion emitters take ~2× longer for these kernels than its
-classic elemental emitters, with no faster code here: ``relax(100, 0.5, 5)``'s program compiled
-in 0.71–0.75 s instead of 1.29–1.45 s and ran as fast (0.167–0.174 s against 0.176–0.183 s on
-a noisy 2-core AMD EPYC VM; ``benchmarks/default_run.py`` compares both in fresh processes), with
-the same steps and the same force to 1e-8 of its peak (rounding: tests/test_compiler.py).
-So lubjax asks for the classic ones, per program (``compiler_options``, never the process-wide
-``XLA_FLAGS``), on the CPU only, and only where this jaxlib still knows the option
-(:func:`compiler_options` probes it once). ``LUBJAX_XLA_OPTIONS=0`` switches it off.
+loop fusions; on the CPU each becomes a kernel of its own, and generating them is most of the
+compile time. XLA's classic elemental emitters compile these kernels about twice as fast as its
+newer MLIR fusion emitters, with code as fast and the same steps (``benchmarks/default_run.py``
+compares both; tests/test_compiler.py). So lubjax asks for the classic ones, per program
+(``compiler_options``, never the process-wide ``XLA_FLAGS``), on the CPU only, and only where
+this jaxlib still knows the option (:func:`compiler_options` probes it once).
+``LUBJAX_XLA_OPTIONS=0`` switches it off.
 
 :func:`compile_all` compiles several programs (``relax``'s run and its error estimate's coarse-mesh
 run) in threads: XLA releases the GIL while it compiles, so the second program is traced while

@@ -349,10 +349,8 @@ def film_collapses(history, dt, order, max_order: int):
 
 #: Under the force norm a thin film's local error is still at most this many times rtol of
 #: itself: the film itself at the default rtol. The film's error hardly moves the force, but
-#: its derivatives do: a film drained to 10⁻⁷ moves by ~10⁻³ per unit z̄0 at a node the
-#: contact's edge has passed, and the force's derivative carries that shift. Left free,
-#: dF̄/dz̄0 at β = 10⁷, z̄0 = 0.1 was 1e-2 off central differences of converged runs; held so,
-#: 4e-4, for 2 % more steps there (19 % at β = 10⁹; benchmarks/derivative_map.py).
+#: its derivatives do (a film drained to 10⁻⁷ moves by ~10⁻³ per unit z̄0 at a node the
+#: contact's edge has passed): docs/accuracy.md#derivatives.
 FILM_CAP = 1e4
 
 
@@ -370,13 +368,11 @@ def film_scale(level, previous, film_error: str, beta):
     still resolved coarsely enough for the derivatives. Without indentation (z̄ ≥ 0, the film
     carries the force) it is the relative control bit for bit.
 
-    "auto" (the default) is "force" from β = ``NEAR_DRY_BETA`` on and "relative" below. Below,
-    the film inside a contact is what a run reports about it (the late neck at β = 10² is held
-    to 0.5 % by the relative control and loosens 10× under "force": benchmarks/accuracy.py).
-    From there on the relative control costs several times the steps of β = 10² (benchmarks/
-    near_dry.py) for a film the default mesh does not resolve (from β = 10⁶ on it is itself a
-    third off). ``Result.unresolved_film()`` flags thin films where the error estimate finds
-    them off. ``beta`` may be traced (a sweep mixes the two).
+    "auto" (the default) is "force" from β = ``NEAR_DRY_BETA`` on and "relative" below, where
+    the film inside a contact is what a run reports about it; above, the relative control costs
+    several times the steps for a film the default mesh does not resolve (docs/accuracy.md).
+    ``Result.unresolved_film()`` flags thin films where the error estimate finds them off.
+    ``beta`` may be traced (a sweep mixes the two).
     """
     relative = jnp.maximum(jnp.abs(level.film), jnp.abs(previous.film))
     if film_error == "relative":
