@@ -21,13 +21,11 @@ Controller: the PI controller of Gustafsson (Hairer & Wanner II §IV.2; diffrax'
     Δt_new = Δt · clip(safety · ε_n^{-β₁/k} · ε_{n-1}^{β₂/k}, f_min, f_max),   k = order + 1,
 
 with β₁ = 0.7, β₂ = 0.4. The growth is capped at 1.5: variable-step BDF2 is zero-stable only
-for step ratios below 1 + √2, and its error constant and Milne's estimate of it degrade on the
-way: with a cap of 2, a ×2 step in the ramp of β = 100, z̄0 = 2 is accepted with a force error
-13 times its tolerance (1.1e-3 of the peak against the converged reference; 6.4e-4 with the cap
-1.5, for 0.6 % more steps; benchmarks/accuracy.py). The same cap serves BDF3, stable on grids
-whose step ratios stay below 2.553 (Z. Li & H.-l. Liao, "Stability of variable-step BDF2 and
-BDF3 methods"). A rejected step shrinks by safety · ε^{-1/k} (at least ×0.1, at most ×0.9); a
-step that is not admissible shrinks by ×0.25.
+for step ratios below 1 + √2, and its error constant and Milne's estimate of it degrade well
+before that (docs/design.md); BDF3 is stable on grids whose step ratios stay below 2.553
+(Z. Li & H.-l. Liao, "Stability of variable-step BDF2 and BDF3 methods"). A rejected step
+shrinks by safety · ε^{-1/k} (at least ×0.1, at most ×0.9); a step that is not admissible
+shrinks by ×0.25.
 """
 
 from __future__ import annotations
