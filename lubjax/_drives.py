@@ -209,7 +209,11 @@ class Load(_Drive):
         return Paraboloid().depth_under_load(self.final_load())
 
     def final_load(self) -> float:
-        """The load the history ends at, F̄(∞) (units of F_s)."""
+        """The load the history ends at.
+
+        Returns:
+            F̄(∞) (units of F_s).
+        """
         return float(np.asarray(self.load(np.asarray([1e300])))[0])
 
     def row(self, step):
