@@ -346,10 +346,10 @@ def film_collapses(history, dt, order, max_order: int):
 
 
 #: Under the force norm a thin film's local error is still at most this many times rtol of
-#: itself: 1 % of the film at the default rtol. The film's error hardly moves the force, but
+#: itself: the film itself at the default rtol. The film's error hardly moves the force, but
 #: its derivatives do (a film drained to 10⁻⁷ moves by ~10⁻³ per unit z̄0 at a node the
 #: contact's edge has passed): docs/accuracy.md#derivatives.
-FILM_CAP = 1e2
+FILM_CAP = 1e4
 
 
 def film_scale(level, previous, film_error: str, beta):
@@ -359,8 +359,8 @@ def film_scale(level, previous, film_error: str, beta):
     through the force it moves: an absolute film error δ inside a contact of indentation
     δ_c = max(-z̄, 0) shifts the elastic indentation by at most δ, and a Hertz force
     (F ∝ δ_c^{3/2}) by 1.5 δ/δ_c of itself. So the film may err by rtol · 2δ_c/3 where that is
-    more than rtol of the film, but not by more than ``FILM_CAP`` × rtol of itself (1 % of the
-    film at the default rtol): the force's own tolerance, not a nanometre film at the
+    more than rtol of the film, but not by more than ``FILM_CAP`` × rtol of itself (the film
+    itself at the default rtol): the force's own tolerance, not a nanometre film at the
     contact's edge (near dry, β ≫ 1, h̄ ~ (βt̄)^{-1/2} ≪ δ_c, the relative control spends most
     steps resolving the film's collapse at each node the contact edge passes), with the film
     still resolved coarsely enough for the derivatives. Without indentation (z̄ ≥ 0, the film
