@@ -131,24 +131,10 @@ def elastic_part(disc: Discretisation, film, z):
     return film - z - disc.profile
 
 
-#: The midpoint film is at least this fraction of the smaller nodal film (see below).
-MIDPOINT_FLOOR = 0.5
-
-
 def film_at_midpoints(disc: Discretisation, film, z):
-    """h̄ at the cell midpoints: the rigid part z̄ + s(r̄) exactly, the elastic part interpolated,
-    and at least ``MIDPOINT_FLOOR`` of the smaller of the two nodes' films.
-
-    Why the floor: inside a contact the elastic part curves with the sphere, and its linear
-    interpolation misses that curvature by ~Δr̄²/8. Where the film is thinner than that (near
-    dry, β ≳ 10⁶, inside the contact: h̄ ~ 10⁻⁹ against Δr̄²/8 ~ 10⁻⁵) the interpolated
-    midpoint film was negative at dozens of faces; the conductance's Simpson rule then took
-    negative 1/h̄³ terms, films pooled into single-node pockets and the step's linearisation
-    grew without bound (dF̄/dz̄0 ~ 10⁵ at β = 10⁹ where it is -3). Where the mesh resolves the
-    film the interpolation stays above 0.9 of the nodes' films and the floor never acts."""
+    """h̄ at the cell midpoints: the rigid part z̄ + s(r̄) exactly, the elastic part interpolated."""
     elastic = elastic_part(disc, film, z)
-    interpolated = z + disc.face_profile + 0.5 * (elastic[:-1] + elastic[1:])
-    return jnp.maximum(interpolated, MIDPOINT_FLOOR * jnp.minimum(film[:-1], film[1:]))
+    return z + disc.face_profile + 0.5 * (elastic[:-1] + elastic[1:])
 
 
 def extrapolate_film(h, h_prev, omega):

@@ -193,16 +193,19 @@ def test_unresolved_film_is_flagged_at_beta_1e9(beta_1e9):
 
 
 @pytest.mark.slow
-def test_error_estimate_covers_the_run_at_beta_1e9_with_either_film_norm(beta_1e9):
-    """The estimate's coarse runs reach t_end at β = 10⁹ with the default (the force norm
-    there) and with the relative one, whose steps resolve the film (they spent their budget on
-    the ramp while the midpoint film of the conductance could go negative inside the contact);
-    the relative run's estimated force error stays within a few rtol of the peak."""
+def test_error_estimate_covers_the_run_at_beta_1e9_or_says_where_it_stops(beta_1e9):
+    """With the default (the force norm there) the estimate's coarse runs reach t_end at
+    β = 10⁹; with the relative one they spend their step budget on the ramp, and relax says
+    from when its errors are NaN (a warning naming the time) instead of returning them
+    quietly."""
     res = beta_1e9
     assert np.all(np.isfinite(res.force_error)) and np.all(np.isfinite(res.film_min_error))
-    rel = lubjax.relax(1e9, Z0, 0.8, settings=lubjax.Settings(film_error="relative"))
-    assert rel.ok and np.all(np.isfinite(rel.force_error))
-    assert np.max(rel.force_error) < 1e-3 * np.max(np.abs(rel.force))
+    with pytest.warns(RuntimeWarning, match=r"coarse runs stopped at t̄ = 0\.[5-8]") as caught:
+        rel = lubjax.relax(1e9, Z0, 0.8, settings=lubjax.Settings(film_error="relative"))
+    assert rel.ok
+    t_stop = float(str(caught[0].message).split("t̄ = ")[1].split(" ")[0])
+    assert np.all(np.isfinite(rel.force_error[rel.t < t_stop - 1e-3]))  # (t̄ printed to 4 digits)
+    assert np.all(np.isnan(rel.force_error[rel.t > t_stop + 1e-3]))
 
 
 # ---------------------------------------------------------------- derivatives near dry
@@ -287,16 +290,14 @@ def test_relax_derivatives_near_dry_match_converged_central_differences():
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=(
-    "known weakness: at beta = 1e9 where the sphere indents the force norm lets the thin film "
-    "err by its own size (FILM_CAP = 1e4), and dF/dz0 in the hold is 2 % off Hertz's at the "
-    "default rtol (z0 = 0.1; 2.3e-2 off converged central differences at z0 = 0.05); bounded "
-    "since the midpoint film's floor, 1.1e-3 at rtol 1e-5, 1.4e-4 with FILM_CAP = 1e2 for 60 % "
-    "more steps (docs/accuracy.md#derivatives)"))
+    "known defect: at beta = 1e9 the tangent of the implicit step is wrong where the sphere "
+    "indents (z0 = 0.05: NaN; z0 = 0.1: 4-9 % off Hertz's in the hold) while the run's values "
+    "are right: the contact's edge crosses the nodes on the ramp faster than the steps resolve "
+    "the film there (benchmarks/derivative_map.py, docs/accuracy.md#derivatives)"))
 def test_relax_derivatives_at_beta_1e9_hold_hertz():
     """In the hold at β = 10⁹ the force is Hertz's of the indentation to its tolerance
     (test_unresolved_film_is_flagged_at_beta_1e9), so dF̄/dz̄0 is Hertz's, -π √(1 - z̄0), to
-    the film's share of it (~10⁻⁵). It grew without bound (NaN at z̄0 = 0.05) while the
-    conductance's midpoint film could go negative inside the contact."""
+    the film's share of it (~10⁻⁵)."""
     import jax
     import jax.numpy as jnp
 
