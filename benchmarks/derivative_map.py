@@ -3,6 +3,7 @@ converged runs, over the stability map, every drive and substrate; and what they
 
     python -m benchmarks.derivative_map [--quick]     # the map
     python -m benchmarks.derivative_map --cost        # grad and jacfwd against the primal
+    python -m benchmarks.derivative_map --min-beta 1e7  # the near-dry cells alone
 
 Each cell is a run on the mesh :func:`lubjax.relax` gives it (``lubjax.mesh_for``, default
 settings) with its response read at ``TIMES_PER_CELL`` times in [t_end/12, t_end]: F̄ for a
@@ -177,8 +178,10 @@ def _write(rows, path, command, machine):
 
 def derivative_map(args, argv):
     path = os.path.splitext(args.out)[0] + ("_quick" if args.quick else "")
+    if args.min_beta is not None:
+        path += f"_beta_from_{args.min_beta:g}"
     rows = []
-    cells = _scenes(args.quick)
+    cells = [c for c in _scenes(args.quick) if args.min_beta is None or c[3] >= args.min_beta]
     for k, (group, drive, substrate, beta, z0, t_end, channel) in enumerate(cells, 1):
         print(f"[{k}/{len(cells)}] {group}, β = {beta:g}, z̄0 = {z0:g}, t̄ ≤ {t_end:g}",
               flush=True)
@@ -243,6 +246,8 @@ def cost(args, argv):
 def main(argv=None):
     ap = _harness.parser(__doc__, "derivative_map", quick="4 β, z̄0 = 0.5, one β per scene")
     ap.add_argument("--cost", action="store_true", help="grad and jacfwd against the primal")
+    ap.add_argument("--min-beta", type=float, default=None,
+                    help="only the cells with beta at least this (writes ..._beta_from_B)")
     args = _harness.parse(ap, argv)
     if args.cost:
         cost(args, argv)

@@ -346,10 +346,10 @@ def film_collapses(history, dt, order, max_order: int):
 
 
 #: Under the force norm a thin film's local error is still at most this many times rtol of
-#: itself: the film itself at the default rtol. The film's error hardly moves the force, but
+#: itself (a tenth of the film at the default rtol). The film's error hardly moves the force, but
 #: its derivatives do (a film drained to 10⁻⁷ moves by ~10⁻³ per unit z̄0 at a node the
 #: contact's edge has passed): docs/accuracy.md#derivatives.
-FILM_CAP = 1e4
+FILM_CAP = 1e3
 
 
 def film_scale(level, previous, film_error: str, beta):

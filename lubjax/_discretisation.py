@@ -131,10 +131,60 @@ def elastic_part(disc: Discretisation, film, z):
     return film - z - disc.profile
 
 
+#: How far a node's fluxes reach in the films: its faces' midpoint films take nodes i-2..i+2.
+FILM_STENCIL = 2
+
+
 def film_at_midpoints(disc: Discretisation, film, z):
-    """h̄ at the cell midpoints: the rigid part z̄ + s(r̄) exactly, the elastic part interpolated."""
+    """h̄ at the cell midpoints: the rigid part z̄ + s(r̄) exactly, the elastic part e = Ŵp̄
+    interpolated with its curvature,
+
+        e(r̄_{i+1/2}) ≈ (e_i + e_{i+1})/2 - (Δr̄²/8) (e''_i + e''_{i+1})/2,
+
+    e'' the three-point second difference at each node (e' = 0 at the axis; the outer node takes
+    its neighbour's). On a uniform mesh this is the four-point cubic (-1, 9, 9, -1)/16.
+
+    Departs from linear interpolation of e: inside a contact e curves with the indenter
+    (e'' ≈ -1/R̄), which the straight chord misses by Δr̄²/8 ~ 10⁻⁵ — against near-dry films of
+    10⁻⁹, so the midpoint film went negative, the conductance took negative 1/h̄³ terms and the
+    tangent of the run grew without bound. With the curvature the midpoint film in a contact is
+    the cubic through the nodal films (exact for a paraboloid's rigid part). It stays a linear,
+    smooth function of the film (a floor, max(·), kinks the model a fit iterates on).
+    """
     elastic = elastic_part(disc, film, z)
-    return z + disc.face_profile + 0.5 * (elastic[:-1] + elastic[1:])
+    slope = jnp.diff(elastic) / disc.face_gap
+    spacing = 0.5 * (disc.face_gap[1:] + disc.face_gap[:-1])
+    interior = jnp.diff(slope) / spacing
+    axis = 2.0 * slope[:1] / disc.face_gap[:1]  # mirror node e_{-1} = e_1
+    curvature = jnp.concatenate([axis, interior, interior[-1:]])
+    mean_curvature = 0.5 * (curvature[:-1] + curvature[1:])
+    chord = 0.5 * (elastic[:-1] + elastic[1:])
+    interpolated = z + disc.face_profile + chord - disc.face_gap**2 / 8.0 * mean_curvature
+    return _smooth_floor(interpolated, film[:-1], film[1:])
+
+
+#: The midpoint film's floor b, as a fraction of the nodal films' harmonic mean, and the half
+#: width, as a fraction of b, over which the film passes onto it.
+MIDPOINT_FLOOR = 0.2
+FLOOR_BLEND = 0.1
+
+
+def _smooth_floor(h_mid, h_left, h_right):
+    """h̄_m held above b = ``MIDPOINT_FLOOR`` × the harmonic mean of the nodes' films, smoothly:
+    max(h̄_m, b) with its corner rounded by the parabola b + (h̄_m - b + w)²/(4w) on
+    |h̄_m - b| < w = ``FLOOR_BLEND`` b, which meets both with a continuous slope.
+
+    Departs from the paper (which has no midpoint): at a near-dry contact's edge the discrete
+    pressure can make the midpoint film negative (a node pins the contact, the cell between
+    interpenetrates) even with the curvature. A resolved film (h̄_m ≥ 0.9 min(h̄_i, h̄_{i+1}),
+    above b + w ≤ 0.44 min) passes bit for bit; the continuous slope keeps a fit's model free
+    of the kink of a plain max().
+    """
+    floor = MIDPOINT_FLOOR * 2.0 * h_left * h_right / (h_left + h_right)
+    width = FLOOR_BLEND * floor
+    corner = floor + (h_mid - floor + width) ** 2 / (4.0 * width)
+    return jnp.where(h_mid >= floor + width, h_mid, jnp.where(h_mid <= floor - width, floor,
+                                                              corner))
 
 
 def extrapolate_film(h, h_prev, omega):

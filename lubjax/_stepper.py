@@ -52,6 +52,7 @@ import jax.numpy as jnp
 
 from . import _multistep as ms
 from ._discretisation import (
+    FILM_STENCIL,
     Discretisation,
     conductance_of_extrapolated,
     face_conductance,
@@ -336,8 +337,10 @@ def _implicit_residual(x, system: ImplicitStep):
 
 def _implicit_jacobian(x, system: ImplicitStep):
     """∂(residual)/∂x: the linear system's matrix at g(h̄ⁿ⁺¹) plus the conductances' dependence
-    on the film, -β ∂(T(g(h̄))p̄)/∂h̄ · ∂h̄/∂x, with the tridiagonal ∂(T(g(h̄))p̄)/∂h̄ read off
-    three jvps (nodes coloured i mod 3) and ∂h̄/∂p̄_j = c Ŵ_{:j}, ∂h̄/∂Δz̄ = 1."""
+    on the film, -β ∂(T(g(h̄))p̄)/∂h̄ · ∂h̄/∂x, with the banded ∂(T(g(h̄))p̄)/∂h̄ (node i's
+    fluxes see the films of nodes i-2..i+2: a face's midpoint film takes four nodes,
+    :func:`lubjax._discretisation.film_at_midpoints`) read off five jvps (nodes coloured
+    i mod 5) and ∂h̄/∂p̄_j = c Ŵ_{:j}, ∂h̄/∂Δz̄ = 1."""
     disc = system.disc
     n = disc.r.shape[0]
     p = jnp.concatenate([x[:-1], jnp.zeros(1, x.dtype)])
@@ -348,20 +351,20 @@ def _implicit_jacobian(x, system: ImplicitStep):
         g = system.beta * face_conductance(disc, h, film_at_midpoints(disc, h, z))
         return flux_divergence(g, p)
 
-    colours = jnp.arange(n) % 3
+    width = 2 * FILM_STENCIL + 1
+    colours = jnp.arange(n) % width
     columns = jnp.stack([jax.jvp(flux, (film,), ((colours == k).astype(film.dtype),))[1]
-                         for k in range(3)])
+                         for k in range(width)])
     rows = jnp.arange(n)
-    lower = columns[(rows - 1) % 3, rows]  # ∂/∂h̄_{i-1}
-    middle = columns[rows % 3, rows]
-    upper = columns[(rows + 1) % 3, rows]  # ∂/∂h̄_{i+1}
     dh = jnp.concatenate(
         [system.compliance * disc.influence[:, :-1], jnp.ones((n, 1), film.dtype)], axis=1
     )
-    zero_row = jnp.zeros((1, n), film.dtype)
-    shifted_down = jnp.concatenate([zero_row, dh[:-1]])  # row i holds dh[i-1]
-    shifted_up = jnp.concatenate([dh[1:], zero_row])  # row i holds dh[i+1]
-    coupling = lower[:, None] * shifted_down + middle[:, None] * dh + upper[:, None] * shifted_up
+    coupling = jnp.zeros_like(dh)
+    for offset in range(-FILM_STENCIL, FILM_STENCIL + 1):
+        # ∂(flux_i)/∂h̄_{i+offset} times row i+offset of ∂h̄/∂x (zero where that node is absent)
+        inside = (rows + offset >= 0) & (rows + offset < n)
+        diagonal = jnp.where(inside, columns[(rows + offset) % width, rows], 0.0)
+        coupling = coupling + diagonal[:, None] * jnp.roll(dh, -offset, axis=0)
     matrix, _ = _linear_system(disc, g, system.dt, system.a0, system.gap_history,
                                system.compliance, system.known_load, system.row)
     return matrix - jnp.concatenate([coupling[:-1], jnp.zeros((1, n), film.dtype)])

@@ -52,8 +52,6 @@ VENDOR = {
 #: status, a line the output must hold, as the page says).
 DOCUMENTED = [
     ("--plot out/run.txt", 0, r"^exit status 2$"),  # errors.md: an unknown plot format
-    # fitting.md: converges, to a viscosity whose error bar misses the truth
-    ("data/water_dc140.csv --no-cache --film-error auto", 0, r"eta = 0\.0\d+ ± 0\.0\d+ Pa s"),
 ]
 #: The suite runs the README's first command and the refusal of errors.md; every other command
 #: runs with ``--doc-commands`` (tests/conftest.py), as CI does after the suite: 2-30 s each on

@@ -25,6 +25,8 @@ Run cost (this module, 2-core VM): the default's runs take ~1 s each at β ≤ 1
 ones 2-3× that; β = 10⁹ with the error estimate ~25 s (marked slow).
 """
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -153,7 +155,9 @@ def finer_1e7():
 def test_film_outputs_are_accurate_or_flagged(mode, finer_1e7):
     """β = 10⁷, every default but the norm (the error estimate on): where
     ``Result.unresolved_film()`` does not flag min h̄ it is within the note's fraction (30 %)
-    of the finer run; where it does, the film is really off (> 10 %). The axis's film, which
+    of the finer run; where it does, the film is really off (> 5 %: 6.5 % under the relative
+    norm, where the estimate is ~5× conservative; it was > 10 % while the midpoint film took a
+    straight chord of the elastic part, docs/model.md). The axis's film, which
     the force feels, is within its estimated error everywhere in contact."""
     res = lubjax.relax(1e7, Z0, T_END, settings=lubjax.Settings(film_error=mode))
     ref = finer_1e7
@@ -164,7 +168,7 @@ def test_film_outputs_are_accurate_or_flagged(mode, finer_1e7):
     t_flag = res.t[np.argmax(flagged)] if np.any(flagged) else np.inf
     assert np.max(off[t < t_flag]) < 0.3
     if np.any(flagged):
-        assert np.max(off[t >= t_flag]) > 0.1
+        assert np.max(off[t >= t_flag]) > 0.05
     centre_off = np.abs(res.at(t, "film_center") - ref.at(t, "film_center"))
     np.testing.assert_array_less(centre_off, np.interp(t, res.t, res.film_center_error))
 
@@ -193,19 +197,18 @@ def test_unresolved_film_is_flagged_at_beta_1e9(beta_1e9):
 
 
 @pytest.mark.slow
-def test_error_estimate_covers_the_run_at_beta_1e9_or_says_where_it_stops(beta_1e9):
-    """With the default (the force norm there) the estimate's coarse runs reach t_end at
-    β = 10⁹; with the relative one they spend their step budget on the ramp, and relax says
-    from when its errors are NaN (a warning naming the time) instead of returning them
-    quietly."""
+def test_error_estimate_covers_the_run_at_beta_1e9(beta_1e9):
+    """The estimate's coarse runs reach t_end at β = 10⁹ with either norm: the default (the
+    force norm there) and the relative one, whose coarse runs spent their step budget on the
+    ramp while the midpoint film took a straight chord of the elastic part (where they stop,
+    relax says from when its errors are NaN: tests/test_api.py)."""
     res = beta_1e9
     assert np.all(np.isfinite(res.force_error)) and np.all(np.isfinite(res.film_min_error))
-    with pytest.warns(RuntimeWarning, match=r"coarse runs stopped at t̄ = 0\.[5-8]") as caught:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
         rel = lubjax.relax(1e9, Z0, 0.8, settings=lubjax.Settings(film_error="relative"))
     assert rel.ok
-    t_stop = float(str(caught[0].message).split("t̄ = ")[1].split(" ")[0])
-    assert np.all(np.isfinite(rel.force_error[rel.t < t_stop - 1e-3]))  # (t̄ printed to 4 digits)
-    assert np.all(np.isnan(rel.force_error[rel.t > t_stop + 1e-3]))
+    assert np.all(np.isfinite(rel.force_error)) and np.all(np.isfinite(rel.film_min_error))
 
 
 # ---------------------------------------------------------------- derivatives near dry
@@ -289,15 +292,13 @@ def test_relax_derivatives_near_dry_match_converged_central_differences():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "known defect: at beta = 1e9 the tangent of the implicit step is wrong where the sphere "
-    "indents (z0 = 0.05: NaN; z0 = 0.1: 4-9 % off Hertz's in the hold) while the run's values "
-    "are right: the contact's edge crosses the nodes on the ramp faster than the steps resolve "
-    "the film there (benchmarks/derivative_map.py, docs/accuracy.md#derivatives)"))
 def test_relax_derivatives_at_beta_1e9_hold_hertz():
     """In the hold at β = 10⁹ the force is Hertz's of the indentation to its tolerance
     (test_unresolved_film_is_flagged_at_beta_1e9), so dF̄/dz̄0 is Hertz's, -π √(1 - z̄0), to
-    the film's share of it (~10⁻⁵)."""
+    the mesh's error in Hertz's force (~10⁻³; central differences of rtol 1e-6 runs on this
+    mesh: 1.2e-3 off at z̄0 = 0.1) and the tangent's own at the default tolerance (a few 10⁻³
+    near dry, moving with rounding: docs/accuracy.md#derivatives). It grew without bound (NaN
+    at z̄0 = 0.05) while the midpoint film took a straight chord of the elastic part."""
     import jax
     import jax.numpy as jnp
 
