@@ -148,8 +148,8 @@ def film_at_midpoints(disc: Discretisation, film, z):
     (e'' ≈ -1/R̄), which the straight chord misses by Δr̄²/8 ~ 10⁻⁵ — against near-dry films of
     10⁻⁹, so the midpoint film went negative, the conductance took negative 1/h̄³ terms and the
     tangent of the run grew without bound. With the curvature the midpoint film in a contact is
-    the cubic through the nodal films (exact for a paraboloid's rigid part). It stays a linear,
-    smooth function of the film (a floor, max(·), kinks the model a fit iterates on).
+    the cubic through the nodal films (exact for a paraboloid's rigid part); what is still
+    negative, at a contact's edge, :func:`_smooth_floor` holds.
     """
     elastic = elastic_part(disc, film, z)
     slope = jnp.diff(elastic) / disc.face_gap
