@@ -64,8 +64,8 @@ def clean_trace(stem="paper_dc154", t_bar=3.0):
 def _markdown(rows):
     lines = ["| scene | noise | converged | parameter | within 1σ | within 2σ | rms z | "
              "rms z (white only) | mean bias / SE | scatter / SE | solver part / SE | "
-             "noise model used |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "noise model used | residuals' lag-1 | noise ρ (AR(1) errors) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for scene, rho, out in rows:
         for name, t in out["table"].items():
             lines.append(
@@ -74,7 +74,8 @@ def _markdown(rows):
                 f"{t['within_1sigma']:.0%} | {t['within_2sigma']:.0%} | {t['rms_z']:.2f} | "
                 f"{t['rms_z_white']:.2f} | {t['mean_bias_over_se']:+.2f} | "
                 f"{t['scatter_over_se']:.2f} | {t['solver_over_se']:.2f} | "
-                f"{', '.join(out['noise_models'])} |")
+                f"{', '.join(out['noise_models'])} | {out['lag1']:.2f} | "
+                f"{out['noise_correlation']:.2f} |")
     return "\n".join(lines) + "\n"
 
 

@@ -69,8 +69,9 @@ def coverage(draws, truth, settings=FIT_SETTINGS, **fit_kwargs):
         (honest errors: 68 % and 95 %), ``rms_z_white`` of their white-noise part alone,
         ``mean_bias_over_se``,
         ``scatter_over_se`` and ``solver_over_se``, each over the mean reported error),
-        ``converged`` (how many), ``n``, ``noise_models`` (those chosen) and ``lag1`` (the mean
-        lag-1 autocorrelation of the residuals).
+        ``converged`` (how many), ``n``, ``noise_models`` (those chosen), ``lag1`` (the mean
+        lag-1 autocorrelation of the residuals) and ``noise_correlation`` (the mean of the
+        noise's ρ the AR(1) errors took, corrected for what the fit absorbs; 0 for white).
     """
     results = fit_traces(draws, settings=settings, **fit_kwargs)
     table = {}
@@ -93,4 +94,6 @@ def coverage(draws, truth, settings=FIT_SETTINGS, **fit_kwargs):
     models = sorted({r.stats["noise_model"] for r in results})
     return dict(table=table, converged=int(sum(r.converged for r in results)), n=len(results),
                 noise_models=models,
-                lag1=float(np.mean([r.stats["autocorrelation_lag1"] for r in results])))
+                lag1=float(np.mean([r.stats["autocorrelation_lag1"] for r in results])),
+                noise_correlation=float(np.mean([r.stats.get("noise_correlation", 0.0)
+                                                 for r in results])))

@@ -11,8 +11,10 @@ At the optimum x̂ with residuals r (in units of each trace's noise estimate) an
   Cov_AR1 = s² (JᵀJ)⁻¹ (Jᵀ R J) (JᵀJ)⁻¹ (exact for AR(1) noise; R⁻¹ is tridiagonal, so R J is a
   banded solve; the scale stays the residuals' s², :func:`ar1_correlation` says why). For
   slowly varying J this is Cov_white × (1+ρ)/(1-ρ): the effective number of independent
-  samples is n_eff = n (1-ρ)/(1+ρ). With ``noise="auto"`` the report uses it when
-  the residuals are not white: |ρ̂| > 3/√n (three standard errors of ρ̂ under white noise).
+  samples is n_eff = n (1-ρ)/(1+ρ), with that same corrected ρ (``stats["noise_correlation"]``;
+  ``stats["autocorrelation_lag1"]`` is the residuals' own ρ̂). With ``noise="auto"`` the report
+  uses it when the residuals are not white: |ρ̂| > 3/√n (three standard errors of ρ̂ under
+  white noise).
 * **Solver error** (the model is a discretisation): the error of the model response at the
   optimum is estimated as the solver estimates its own (``lubjax.Result.force_error``): the nested
   coarse mesh (every other node, second order: error ≈ (y_coarse - y)/3) plus the time error from
@@ -154,13 +156,15 @@ def summarise(r, J, sizes, labels, *, noise="auto", solver_error=None) -> dict:
     correlated = abs(rho) > WHITE_THRESHOLD / math.sqrt(n)
     use = noise if noise != "auto" else ("ar1" if correlated else "white")
     parts = {"white": cov_white}
+    noise_rhos = []  # the noise's ρ per trace, corrected for what the fit absorbs (AR(1) only)
     if use == "ar1" and not finite:
         cov_noise = parts["ar1"] = np.full_like(A, np.nan)
     elif use == "ar1":
         meat = np.zeros_like(A)
         for s, k in blocks:
             Jb = J[s : s + k]
-            meat += Jb.T @ ar1_correlated(Jb, ar1_correlation(r[s : s + k], Jb))
+            noise_rhos.append(ar1_correlation(r[s : s + k], Jb))
+            meat += Jb.T @ ar1_correlated(Jb, noise_rhos[-1])
         cov_noise = s2 * inv @ meat @ inv
         parts["ar1"] = cov_noise
     else:
@@ -182,11 +186,18 @@ def summarise(r, J, sizes, labels, *, noise="auto", solver_error=None) -> dict:
     with np.errstate(invalid="ignore", divide="ignore"):
         scaled_ok = finite and np.all(dg > 0)
         cond = float(np.linalg.cond(A / np.outer(dg, dg))) if scaled_ok else math.inf
-    n_eff = n * (1 - rho) / (1 + rho) if use == "ar1" else float(n)
+    if noise_rhos:  # the effective sample count of the noise the errors assume, trace by trace
+        n_eff = sum(k * (1 - q) / (1 + q) for (_, k), q in zip(blocks, noise_rhos))
+        noise_rho = float(np.sum([k * q for (_, k), q in zip(blocks, noise_rhos)]) / n)
+    elif use == "ar1":  # no finite Jacobian to correct with: the residuals' own lag-1
+        n_eff, noise_rho = n * (1 - rho) / (1 + rho), rho
+    else:
+        n_eff, noise_rho = float(n), 0.0
     stats = dict(
         n_samples=int(n), n_parameters=int(p), dof=int(dof), chi2=chi2, reduced_chi2=s2,
         autocorrelation_lag1=rho, durbin_watson=float(np.sum(np.diff(rr) ** 2) / max(chi2, 1e-300)),
-        noise_model=use, n_effective=float(n_eff), **information(chi2, n, p),
+        noise_model=use, noise_correlation=noise_rho, n_effective=float(n_eff),
+        **information(chi2, n, p),
     )
     return dict(
         covariance=cov, parts=parts, stats=stats, labels=list(labels), sizes=list(sizes),

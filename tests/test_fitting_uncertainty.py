@@ -20,7 +20,8 @@ DRAWS = 24
 
 
 def _print(label, out):
-    print(f"\n{label}: lag-1 {out['lag1']:.3f}, noise models {out['noise_models']}")
+    print(f"\n{label}: lag-1 {out['lag1']:.3f} (noise's {out['noise_correlation']:.3f}), "
+          f"noise models {out['noise_models']}")
     for name, t in out["table"].items():
         print(f"  {name:10s} rms z {t['rms_z']:.2f} (white only {t['rms_z_white']:.2f}), "
               f"bias/SE {t['mean_bias_over_se']:+.2f}, scatter/SE {t['scatter_over_se']:.2f}, "
