@@ -1,4 +1,6 @@
 import os
+import subprocess
+import sys
 
 import jax
 import pytest
@@ -17,6 +19,23 @@ def pytest_addoption(parser):
              "docs and docstrings (tests/test_doc_commands.py, test_docs_examples.py, "
              "test_docstring_examples.py; about 5 minutes on two cores); CI runs them after the "
              "suite")
+
+
+def pytest_configure(config):
+    """The programs the tests jit themselves (jax.jit of a jacfwd, of a loss) compile with the
+    XLA option lubjax's own programs take on the CPU (lubjax/_compiler.py: the classic emitters,
+    about twice as fast to compile, code as fast). Set in XLA_FLAGS before any backend starts
+    (the xdist workers inherit it), and only where this jaxlib knows the flag: XLA aborts on an
+    unknown one, so a child process tries it first."""
+    flag = "--xla_cpu_use_fusion_emitters=false"
+    if "xla_cpu_use_fusion_emitters" in os.environ.get("XLA_FLAGS", ""):
+        return
+    flags = (os.environ.get("XLA_FLAGS", "") + " " + flag).strip()
+    probe = subprocess.run(
+        [sys.executable, "-c", "import jax; jax.numpy.ones(1).block_until_ready()"],
+        env=dict(os.environ, XLA_FLAGS=flags, JAX_PLATFORMS="cpu"), capture_output=True)
+    if probe.returncode == 0:
+        os.environ["XLA_FLAGS"] = flags
 
 
 def pytest_collection_modifyitems(config, items):

@@ -163,7 +163,13 @@ def test_separate_and_joint_fits_of_the_paper_traces():
         assert res.rms_residual == pytest.approx(float(tr.metadata["noise_N"]), rel=0.15)
         assert res.stats["reduced_chi2"] == pytest.approx(1.0, abs=0.15)
         assert res.stats["noise_model"] == "white"
-    twins = fitting.fit_traces([read_data(s, clean=True) for s in PAPER])
+    # The twins start where the noisy fits ended and stop after 10 iterations: without noise
+    # LM creeps on at rounding level to its limit (19-47 iterations), and the values move by
+    # < 0.03 of a standard error after the tenth. The solver-error estimate is not needed here.
+    twins = fitting.fit_traces([read_data(s, clean=True) for s in PAPER], max_iter=10,
+                               model_error=False,
+                               starts=[fitting.Start(dict(r.values), ("the noisy fit",))
+                                       for r in separate])
     for tr, noisy, twin in zip(traces, separate, twins, strict=True):
         bias = {n: (twin.values[n] - float(tr.metadata[TRUE[n]])) / noisy.stderr[n]
                 for n in ("E_star", "viscosity", "z0")}

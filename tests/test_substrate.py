@@ -93,8 +93,8 @@ def test_viscoelastic_gradients_reverse_equals_forward():
         return lubjax.stepper.evaluate(traj.steps, plan.t, "force")
 
     p0 = jnp.array([3.0, 0.7])
-    rev = jax.jacrev(curve)(p0)
-    fwd = jax.jacfwd(curve)(p0)
+    rev = jax.jit(jax.jacrev(curve))(p0)
+    fwd = jax.jit(jax.jacfwd(curve))(p0)
     assert np.all(np.isfinite(rev))
     np.testing.assert_allclose(rev, fwd, rtol=1e-6, atol=1e-14)
     f = jax.jit(curve)
