@@ -249,7 +249,7 @@ def test_near_dry_derivative_on_the_fits_mesh_matches_central_differences():
 
 def _relax_derivatives(beta, z0, times):
     """jacfwd and jacrev of relax's F̄ at ``times`` in (ln β, z̄0), default settings, and central
-    differences (steps 2e-3, 4e-3) of runs at rtol 1e-6 on the same mesh."""
+    differences in z̄0 (steps 2e-3, 4e-3) of runs at rtol 1e-6 on the same mesh."""
     import jax
     import jax.numpy as jnp
 
@@ -267,8 +267,9 @@ def _relax_derivatives(beta, z0, times):
     tol = lubjax.Settings(rtol=1e-6, max_steps=100_000).tolerance()
     run = jax.jit(lambda q: evaluate(
         rollout(disc, jnp.exp(q[0]), q[1], lubjax.Travel(), times[-1], tol).steps, times, "force"))
-    central = {h: np.stack([(np.asarray(run(p + h * e)) - np.asarray(run(p - h * e))) / (2 * h)
-                            for e in jnp.eye(2)], axis=1) for h in (2e-3, 4e-3)}
+    e = jnp.array([0.0, 1.0])  # z̄0 only: d/d ln β is below what these runs resolve
+    central = {h: (np.asarray(run(p + h * e)) - np.asarray(run(p - h * e))) / (2 * h)
+               for h in (2e-3, 4e-3)}
     return forward, reverse, central
 
 
@@ -286,7 +287,7 @@ def test_relax_derivatives_near_dry_match_converged_central_differences():
     is below what the reference resolves."""
     times = np.linspace(0.5, 5.0, 10)
     forward, reverse, central = _relax_derivatives(1e7, 0.1, times)
-    cd, cd2 = central[2e-3][:, 1], central[4e-3][:, 1]
+    cd, cd2 = central[2e-3], central[4e-3]
     scale = np.max(np.abs(cd))
     assert np.max(np.abs(cd - cd2)) < 2e-3 * scale  # the reference is known this well
     assert np.max(np.abs(forward[:, 1] - cd)) < 3e-3 * scale
@@ -298,16 +299,23 @@ def test_relax_derivatives_at_beta_1e9_hold_hertz():
     """In the hold at β = 10⁹ the force is Hertz's of the indentation to its tolerance
     (test_unresolved_film_is_flagged_at_beta_1e9), so dF̄/dz̄0 is Hertz's, -π √(1 - z̄0), to
     the mesh's error in Hertz's force (~10⁻³; central differences of rtol 1e-6 runs on this
-    mesh: 1.2e-3 off at z̄0 = 0.1) and the tangent's own at the default tolerance (a few 10⁻³
-    near dry, moving with rounding: docs/accuracy.md#derivatives). It grew without bound (NaN
-    at z̄0 = 0.05) while the midpoint film took a straight chord of the elastic part."""
+    mesh: 1.2e-3 off at z̄0 = 0.1) and the tangent's own error at the run's tolerance.
+
+    At rtol 2e-5 the tangent is converged: within 1.4e-3 of Hertz at z̄0 = 0.05 and 0.1, the
+    same to 1e-4 under either XLA CPU emitter; asked at z̄0 = 0.1 (the tighter run takes 2.5×
+    the default's time): 3e-3. At the default rtol it is not:
+    3e-4 to 6.4e-3 off alone, depending on the compiled program's rounding, and 1.9e-2 inside
+    the suite after other work in the same process (docs/accuracy.md#derivatives); asked:
+    3e-2, what the docs claim for the default near dry. It grew without bound (NaN at
+    z̄0 = 0.05) while the midpoint film took a straight chord of the elastic part."""
     import jax
     import jax.numpy as jnp
 
-    settings = lubjax.Settings(error_estimate=False)
     hold = np.array([1.2, 1.6, 2.0])
-    for z0 in (0.05, 0.1):
-        slope = np.asarray(jax.jacfwd(lambda z: lubjax.relax(1e9, z, 2.0, settings=settings).at(
-            hold))(jnp.asarray(z0)))
-        hertz = -np.pi * np.sqrt(1.0 - z0)
-        np.testing.assert_allclose(slope, hertz, rtol=1e-2)
+    for rtol, bound, gaps in ((2e-5, 3e-3, (0.1,)), (lubjax.Settings().rtol, 3e-2, (0.05, 0.1))):
+        settings = lubjax.Settings(rtol=rtol, max_steps=100_000, error_estimate=False)
+        for z0 in gaps:
+            slope = np.asarray(jax.jacfwd(lambda z, s=settings: lubjax.relax(
+                1e9, z, 2.0, settings=s).at(hold))(jnp.asarray(z0)))
+            hertz = -np.pi * np.sqrt(1.0 - z0)
+            np.testing.assert_allclose(slope, hertz, rtol=bound, err_msg=f"rtol {rtol}")
