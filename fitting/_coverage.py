@@ -95,5 +95,5 @@ def coverage(draws, truth, settings=FIT_SETTINGS, **fit_kwargs):
     return dict(table=table, converged=int(sum(r.converged for r in results)), n=len(results),
                 noise_models=models,
                 lag1=float(np.mean([r.stats["autocorrelation_lag1"] for r in results])),
-                noise_correlation=float(np.mean([r.stats.get("noise_correlation", 0.0)
+                noise_correlation=float(np.mean([r.stats["noise_correlation"]
                                                  for r in results])))
