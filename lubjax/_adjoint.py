@@ -17,6 +17,7 @@ Each replayed step's tangent is that of the fully implicit step (lubjax/_stepper
 from __future__ import annotations
 
 import functools
+import math
 from typing import NamedTuple
 
 import jax
@@ -48,12 +49,30 @@ def _replay_step(inputs: Inputs, point, t, t_new, order):
                                           candidate.dissipation)
 
 
-def _scheduled(rec: Record, m, active):
-    """Accepted step m's times and formula; a harmless backward Euler step where it is not
-    ``active`` (past the run's end), so a masked branch computes nothing singular."""
-    t = rec.t[m]
-    t_new = jnp.where(active, rec.t_new[m], t + 1.0)
-    return t, t_new, jnp.where(active, rec.order[m], 1)
+def _scheduled(rec: Record, m, n_accepted):
+    """Accepted step m's times and formula. Past the run's end (m ≥ ``n_accepted``: a masked
+    step of the adjoint's last sub-block, or any step of a batched one) a backward Euler step
+    from the run's last time a thousandth of its last step long: close to the state it starts
+    from, so the masked step computes nothing singular whose zero cotangent would turn NaN."""
+    active = m < n_accepted
+    inside = jnp.minimum(m, rec.t.shape[0] - 1)
+    last = jnp.maximum(n_accepted - 1, 0)
+    end, last_dt = rec.t_new[last], rec.t_new[last] - rec.t[last]
+    t = jnp.where(active, rec.t[inside], end)
+    t_new = jnp.where(active, rec.t_new[inside],
+                      end + 1e-3 * jnp.where(last_dt > 0, last_dt, 1.0))
+    return t, t_new, jnp.where(active, rec.order[inside], 1)
+
+
+def sub_blocks(block: int) -> tuple[int, int]:
+    """(count, size): the adjoint runs a block of ``block`` steps as ``count`` sub-blocks of
+    ``size`` (~√block each, count·size ≥ block). Why: a sub-block past the run's end is skipped
+    by a ``lax.cond``, and in reverse mode each cond costs about as much as two steps (its
+    residuals are copied out whole): one per step made the adjoint 60 % slower, one per block
+    would replay up to a block of needless steps at the run's end."""
+    size = math.isqrt(block - 1) + 1
+    count = -(-block // size)
+    return count, -(-block // count)
 
 
 class Sensitivity(NamedTuple):
@@ -101,7 +120,7 @@ def forward_sensitivity(static, residuals, live):
         anchor = jax.tree_util.tree_map(lambda c: c[m // block], rec.checkpoints)
         point = jax.tree_util.tree_map(
             functools.partial(jnp.where, m % block == 0), anchor, point)
-        t, t_new, order = _scheduled(rec, m, m < n_accepted)
+        t, t_new, order = _scheduled(rec, m, n_accepted)
         (point, _), (point_dot, series_dot) = jax.jvp(
             lambda p, i: _replay_step(i, p, t, t_new, order), (point, inputs),
             (point_dot, inputs_dot))
@@ -119,32 +138,45 @@ def adjoint_sensitivity(static, residuals, cotangent: Sensitivity):
     inputs, rec, n_accepted = residuals
     n = inputs.tol.max_steps
     block = block_size(n)
+    count, size = sub_blocks(block)
+    slots = count * size
     padded = jax.tree_util.tree_map(
-        lambda c: jnp.concatenate([c, jnp.zeros(block, c.dtype)]), cotangent.series)
+        lambda c: jnp.concatenate([c, jnp.zeros(slots, c.dtype)]), cotangent.series)
+    zero = jnp.zeros((), inputs.disc.r.dtype)
 
     def run_block(j, point, inputs):
-        def one(point, i):
-            m = j * block + i
-            active = m < n_accepted
+        end = jnp.minimum((j + 1) * block, n_accepted)
 
-            def go(point):
-                t, t_new, order = _scheduled(rec, m, active)
-                return _replay_step(inputs, point, t, t_new, order)
+        def one(point, m):
+            # Steps past the block's end (the next block's) or the run's are masked: their
+            # state is not kept and their series is zero, so no cotangent reaches them.
+            active = m < end
+            t, t_new, order = _scheduled(rec, m, n_accepted)
+            new, series = _replay_step(inputs, point, t, t_new, order)
+            keep = functools.partial(jnp.where, active)
+            return (jax.tree_util.tree_map(keep, new, point),
+                    jax.tree_util.tree_map(lambda s: keep(s, zero), series))
+
+        def sub_block(point, k):
+            steps = j * block + k * size + jnp.arange(size)
 
             def skip(point):
-                zero = jnp.zeros((), inputs.disc.r.dtype)
-                return point, Series(*(zero,) * len(Series._fields))
+                return point, Series(*(jnp.zeros(size, zero.dtype),) * len(Series._fields))
 
-            return jax.lax.cond(active, go, skip, point)
+            return jax.lax.cond(steps[0] < end, lambda p: jax.lax.scan(one, p, steps), skip,
+                                point)
 
-        return jax.lax.scan(one, point, jnp.arange(block))
+        point, series = jax.lax.scan(sub_block, point, jnp.arange(count))
+        return point, jax.tree_util.tree_map(lambda s: s.reshape(slots), series)
 
     def body(carry):
         j, point_ct, inputs_ct = carry
         start = jax.tree_util.tree_map(lambda c: c[j], rec.checkpoints)
         _, pullback = jax.vjp(functools.partial(run_block, j), start, inputs)
+        in_block = jnp.arange(slots) < block
         series_ct = jax.tree_util.tree_map(
-            lambda c: jax.lax.dynamic_slice_in_dim(c, j * block + 1, block), padded)
+            lambda c: jnp.where(in_block, jax.lax.dynamic_slice_in_dim(c, j * block + 1, slots),
+                                0.0), padded)
         point_ct, step_inputs_ct = pullback((point_ct, Series(*series_ct)))
         return j - 1, point_ct, _add(inputs_ct, step_inputs_ct)
 

@@ -32,6 +32,52 @@ def test_grad_agrees_with_jacfwd(order):
     np.testing.assert_allclose(g_rev, g_fwd, rtol=1e-6)
 
 
+@pytest.mark.slow
+def test_adjoint_at_block_ends_past_the_run_and_batched():
+    """The adjoint runs each checkpointed block in sub-blocks and masks the steps past the
+    block's or the run's end (lubjax/_adjoint.py): grad equals the forward replay for runs that
+    stop inside a sub-block, on a block's last step and with the budget spent, alone and under
+    vmap (where every sub-block runs, masked)."""
+    from lubjax._adjoint import sub_blocks
+    from lubjax._loop import block_size
+
+    max_steps = 300
+    block = block_size(max_steps)
+    count, size = sub_blocks(block)
+    assert count * size > block  # so some steps of every block are masked
+    settings = lubjax.Settings(**COARSE, max_steps=max_steps)
+    disc, tol = lubjax.stepper.discretise(settings.mesh()), settings.tolerance()
+    times = jnp.linspace(0.05, 1.0, 12)
+
+    def run(beta, t_end):
+        return lubjax.stepper.rollout(disc, beta, 0.7, lubjax.Travel(), t_end, tol)
+
+    def loss(beta, t_end):
+        force = lubjax.stepper.evaluate(run(beta, t_end).steps, times, "force")
+        return jnp.sum(jnp.where(jnp.isfinite(force), force, 0.0) * jnp.arange(1.0, 13.0))
+
+    # Runs ending mid-sub-block and on a block's last step (t_end on an accepted time of a
+    # longer run: the same steps up to there), and one whose budget runs out.
+    full = jax.jit(run)(80.0, 1.0)
+    t, accepted = np.asarray(full.steps.t), np.asarray(full.steps.accepted)
+    levels = t[accepted & np.isfinite(t)]  # levels[k]: the time after k accepted steps
+    k_block = (int(full.accepted) // block) * block
+    k_sub = next(k for k in range(k_block - 1, 0, -1) if (k % block) % size)
+    ends = {"block": levels[k_block], "sub-block": levels[k_sub], "budget": 3.0}
+    for case, k in (("block", k_block), ("sub-block", k_sub)):
+        assert int(jax.jit(run)(80.0, ends[case]).accepted) == k, case
+    assert int(jax.jit(run)(80.0, 3.0).status) == lubjax.stepper.Status.BUDGET_SPENT
+    grad = jax.jit(jax.grad(loss))
+    forward = jax.jit(jax.jacfwd(loss))
+    for case, t_end in ends.items():
+        g, f = float(grad(80.0, t_end)), float(forward(80.0, t_end))
+        assert np.isfinite(g) and g != 0.0, case
+        np.testing.assert_allclose(g, f, rtol=1e-9, err_msg=case)
+    batch = jnp.array([ends["sub-block"], ends["block"], ends["budget"]])
+    g_batch = np.asarray(jax.jit(jax.vmap(jax.grad(loss), (None, 0)))(80.0, batch))
+    np.testing.assert_allclose(g_batch, [float(forward(80.0, t)) for t in batch], rtol=1e-9)
+
+
 def test_a_differentiated_run_has_the_values_of_the_plain_run():
     """Under jvp and vjp the loop also records the steps the derivatives replay: the values it
     returns are the plain run's."""
