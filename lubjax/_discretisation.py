@@ -96,7 +96,9 @@ def _discretise(mesh: Mesh, elastic) -> Discretisation:
     arrays = (r, area, face, np.diff(r), w, area[:-1, None] * w[:-1, :-1], force_weights(mesh),
               shape.profile(r), shape.profile(face))
     # device_put, not jnp.asarray: outside jit, jnp.asarray compiles a copy per new shape.
-    return Discretisation(*(jax.device_put(np.asarray(a, np.float64)) for a in arrays))
+    # Concrete even when first asked for under jit (relax traced): the cache outlives the trace.
+    with jax.ensure_compile_time_eval():
+        return Discretisation(*(jax.device_put(np.asarray(a, np.float64)) for a in arrays))
 
 
 def film_thickness(disc: Discretisation, z, pressure):

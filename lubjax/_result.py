@@ -236,9 +236,10 @@ def result_of(trajs, disc, beta, z0, t_end, ptimes, max_steps, compile_s, run_s)
     )
 
 
-def traced_result(traj, disc, beta, z0, t_end, times) -> Result:
+def traced_result(traj, disc, r, beta, z0, t_end, times) -> Result:
     """The :class:`Result` of a run under ``jit`` or ``vmap``: its entries as the loop left
-    them, its flags traced, no error estimate."""
+    them, its flags traced, no error estimate. ``r``: the mesh's nodes (concrete: under ``jit``
+    the discretisation's arrays are traced)."""
     steps = traj.steps
     series = {k: getattr(steps, k) for k in SERIES}
     nan = jnp.full_like(steps.force, jnp.nan)
@@ -246,7 +247,7 @@ def traced_result(traj, disc, beta, z0, t_end, times) -> Result:
     reached = (jnp.asarray(times) <= last) | (traj.status == DONE)
     pressure, film = unreached_nan(reached, traj.profiles, traj.profile_films, True)
     return Result(
-        beta=beta, z0=z0, t_end=t_end, **series, r=np.asarray(disc.r), profile_times=times,
+        beta=beta, z0=z0, t_end=t_end, **series, r=np.asarray(r), profile_times=times,
         pressure=pressure, displacement=displacement_of(disc, traj, film), film=film,
         film_positive=~jnp.any(film <= 0),
         finished=traj.status == DONE, stop_reason="",

@@ -19,17 +19,45 @@ from ._drives import as_drive
 from ._linear_call import linear_call
 from ._loop import Inputs, loop
 from ._output import Trajectory
+from ._sharding import batch, batching_mode
 from ._substrate import as_substrate
+
+
+def _batched_by_map(fn):
+    """``fn`` of one run, which under ``vmap`` maps over the batch on a CPU (``lax.map``: each
+    member its own steps, as :func:`lubjax.sweep` does) and ``vmap``s it on an accelerator
+    (:func:`lubjax._sharding.batching_mode`). Why: a ``vmap``ped loop runs every member until
+    the slowest is done and computes both branches of every ``cond``, and on a CPU its batched
+    LU is only a loop of LAPACK calls; ``vmap(relax)`` and ``vmap(force_curve)`` would be many
+    times slower than the same batch mapped."""
+    batched_fn = jax.custom_batching.custom_vmap(fn)
+
+    @batched_fn.def_vmap
+    def _rule(axis_size, in_batched, inputs):
+        leaves, treedef = jax.tree_util.tree_flatten(inputs)
+        flags = tuple(jax.tree_util.tree_leaves(in_batched))
+        if not any(flags):
+            out = fn(inputs)
+            return out, jax.tree_util.tree_map(lambda _: False, out)
+        out = batch(lambda *x: fn(jax.tree_util.tree_unflatten(treedef, x)), flags,
+                    batching_mode())(*leaves)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return batched_fn
+
+
+_plain_loop = _batched_by_map(lambda inputs: loop(inputs, record=False)[0])
+_recorded_loop = _batched_by_map(lambda inputs: loop(inputs, record=True))
 
 
 @jax.custom_jvp
 def _rollout(inputs: Inputs) -> Trajectory:
-    return loop(inputs, record=False)[0]
+    return _plain_loop(inputs)
 
 
 def _rollout_jvp(primals, tangents):
     (inputs,), (inputs_dot,) = primals, tangents
-    traj, rec = loop(inputs, record=True)
+    traj, rec = _recorded_loop(inputs)
     leaves, treedef = jax.tree_util.tree_flatten(inputs)
     dots = jax.tree_util.tree_leaves(
         inputs_dot, is_leaf=lambda x: isinstance(x, jax.custom_derivatives.SymbolicZero))

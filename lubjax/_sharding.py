@@ -12,6 +12,7 @@ Several hosts (``jax.distributed.initialize()``) share one mesh; untested on a c
 
 from __future__ import annotations
 
+import contextvars
 import os
 
 import jax
@@ -65,11 +66,19 @@ def batch_mesh(n_devices: int) -> Mesh | None:
 BATCHING = ("auto", "map", "vmap")
 
 
+#: The mode a batch asked for by name is traced under (:func:`batch`): a run inside it that
+#: meets ``vmap`` (lubjax/_rollout.py) batches as asked, not as "auto" would.
+_ASKED: contextvars.ContextVar[str] = contextvars.ContextVar("lubjax_batching", default="auto")
+
+
 def batching_mode(batching: str = "auto") -> str:
     """``"map"`` or ``"vmap"`` for ``batching`` (see :data:`BATCHING`; docs/design.md,
-    "Differentiation and batching", says why CPU maps)."""
+    "Differentiation and batching", says why CPU maps). "auto" inside a :func:`batch` that
+    asked for "vmap" is "vmap"."""
     if batching not in BATCHING:
         raise ValueError(f"batching must be one of {', '.join(BATCHING)}, got {batching!r}")
+    if batching == "auto":
+        batching = _ASKED.get()
     if batching == "auto":
         return "map" if jax.default_backend() == "cpu" else "vmap"
     return batching
@@ -80,7 +89,16 @@ def batch(fn, batched: tuple[bool, ...], mode: str):
     ``batched`` (the others shared): ``jax.vmap`` for ``mode="vmap"``, a ``lax.map`` (one member
     after another, each with its own adaptive steps) for ``"map"``."""
     if mode == "vmap":
-        return jax.vmap(fn, in_axes=tuple(0 if b else None for b in batched))
+        vmapped = jax.vmap(fn, in_axes=tuple(0 if b else None for b in batched))
+
+        def all_at_once(*args):
+            token = _ASKED.set("vmap")
+            try:
+                return vmapped(*args)
+            finally:
+                _ASKED.reset(token)
+
+        return all_at_once
 
     def mapped(*args):
         def one(members):

@@ -357,4 +357,4 @@ def _relax_traced(beta, z0, t_end, drive, substrate, settings, profile_times, me
     disc = discretise(mesh, substrate, indenter)
     traj = _forward_rollout(disc, beta, z0, drive, substrate, t_end, times,
                             settings.tolerance())
-    return traced_result(traj, disc, beta, z0, t_end, times)
+    return traced_result(traj, disc, mesh.r, beta, z0, t_end, times)
