@@ -50,7 +50,8 @@ class FitResult(NamedTuple):
         group: the names of the traces of a joint fit (empty for a separate fit).
         scales: the :class:`Scales` read off the trace.
         stats: fit statistics (chi2, reduced_chi2, noise_model, autocorrelation_lag1 (the
-            residuals'), noise_correlation (the noise's, AR(1) only), n_effective,
+            residuals'), noise_correlation (the noise's, AR(1) only), noise_scale (the AR(1)
+            noise's variance over the reduced chi-square; 1 otherwise), n_effective,
             rms_residual, condition, max_correlation, error_parts, ...;
             ``fitting._stats.summarise``).
         converged: whether the optimiser converged (the first flag says how).

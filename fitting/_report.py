@@ -198,7 +198,8 @@ def fit_report(res: FitResult, min_correl: float = 0.1) -> str:
         f"    residual lag-1 autocorrelation = {st['autocorrelation_lag1']:.3g} "
         f"(Durbin-Watson {st['durbin_watson']:.3g})",
         f"    noise model        = {st['noise_model']}"
-        + (f" (noise ρ {st['noise_correlation']:.3g}, effective samples {st['n_effective']:.0f})"
+        + (f" (noise ρ {st['noise_correlation']:.3g}, effective samples {st['n_effective']:.0f}, "
+           f"noise variance {st['noise_scale']:.3g} × the reduced chi-square)"
            if st["noise_model"] == "ar1" else ""),
         f"    converged          = {res.converged}: {res.flags[0]}",
     ]

@@ -8,8 +8,9 @@ At the optimum x̂ with residuals r (in units of each trace's noise estimate) an
   noise's lag-1 correlation ρ (:func:`ar1_correlation`: the ρ whose residuals, after the fit
   absorbed part of the noise, would show the observed lag-1 ratio) defines the correlation
   matrix R_ij = ρ^|i-j|, and the covariance of the least-squares estimate is the sandwich
-  Cov_AR1 = s² (JᵀJ)⁻¹ (Jᵀ R J) (JᵀJ)⁻¹ (exact for AR(1) noise; R⁻¹ is tridiagonal, so R J is a
-  banded solve; the scale stays the residuals' s², :func:`ar1_correlation` says why). For
+  Cov_AR1 = c s² (JᵀJ)⁻¹ (Jᵀ R J) (JᵀJ)⁻¹ (exact for AR(1) noise; R⁻¹ is tridiagonal, so R J is
+  a banded solve; c = (n - p)/tr(M R M) undoes what the fit absorbs of the noise's variance,
+  guarded at long correlations, :func:`ar1_scale`; ``stats["noise_scale"]``). For
   slowly varying J this is Cov_white × (1+ρ)/(1-ρ): the effective number of independent
   samples is n_eff = n (1-ρ)/(1+ρ), with that same corrected ρ (``stats["noise_correlation"]``;
   ``stats["autocorrelation_lag1"]`` is the residuals' own ρ̂). With ``noise="auto"`` the report
@@ -42,6 +43,8 @@ from scipy.optimize import brentq
 MAX_CORRELATION = 0.999
 #: The largest |ρ| the AR(1) noise model takes (R's condition grows like 2/(1 - ρ)).
 MAX_NOISE_CORRELATION = 0.99
+#: The largest ρ :func:`ar1_scale` corrects the noise's scale for (see there).
+SCALE_CORRELATION = 0.9
 MAX_CONDITION = 1e8
 NOISE_MODELS = ("auto", "white", "ar1")
 #: |ρ̂| above this many standard errors (1/√n) of a white-noise ρ̂ means "not white".
@@ -69,6 +72,20 @@ def ar1_correlated(J: np.ndarray, rho: float) -> np.ndarray:
     return solve_banded((1, 1), ab / (1 - rho**2), J)
 
 
+def _fit_basis(J: np.ndarray) -> np.ndarray:
+    """An orthonormal basis Q of what a fit absorbs: the finite columns of J and the constants."""
+    k = J.shape[0]
+    basis = np.concatenate([J, np.ones((k, 1))], axis=1)
+    basis = basis[:, np.all(np.isfinite(basis), axis=0)]
+    u, sv, _ = np.linalg.svd(basis, full_matrices=False)
+    return u[:, sv > sv[0] * 1e-10] if sv.size and sv[0] > 0 else np.zeros((k, 0))
+
+
+def _projected_trace(q: np.ndarray, rho: float) -> float:
+    """tr(M R(ρ) M) = tr(R) - tr(QᵀRQ), M = I - QQᵀ: E[Σr²]/σ² under AR(1) noise."""
+    return q.shape[0] - float(np.trace(q.T @ ar1_correlated(q, rho)))
+
+
 def ar1_correlation(r: np.ndarray, J: np.ndarray) -> float:
     """ρ of AR(1) noise e from the residuals r = (I - H) e of a least-squares fit.
 
@@ -76,21 +93,14 @@ def ar1_correlation(r: np.ndarray, J: np.ndarray) -> float:
     lag-1 autocorrelation understates the noise's (at ρ = 0.8 on a few hundred samples the
     errors came out 10-27 % too small). With M the projection off the columns of J and the
     constants, E[r rᵀ] = σ² M R(ρ) M, so ρ solves tr(S M R M)/tr(M R M) = Σ r_i r_{i+1}/Σ r_i²
-    (S the shift), within [-0.99, 0.99].
-
-    The noise's σ² is *not* taken as Σr²/tr(M R M), though that is its unbiased estimate under
-    AR(1): on real curves the residuals near ρ = 1 are the model's misfit or drift, not noise,
-    and that estimate grows without bound there; the reported s² = Σr²/(n - p) stays.
+    (S the shift), within [-0.99, 0.99]. The noise's σ² is :func:`ar1_scale`'s.
     """
     k = r.size
     r = r - np.mean(r)
     g0, g1 = float(r @ r), float(r[1:] @ r[:-1])
     if k < 3 or g0 <= 0:
         return 0.0
-    basis = np.concatenate([J, np.ones((k, 1))], axis=1)
-    basis = basis[:, np.all(np.isfinite(basis), axis=0)]
-    u, sv, _ = np.linalg.svd(basis, full_matrices=False)
-    q = u[:, sv > sv[0] * 1e-10] if sv.size and sv[0] > 0 else np.zeros((k, 0))
+    q = _fit_basis(J)
 
     def ratio(rho):
         a = ar1_correlated(q, rho)  # R Q
@@ -107,6 +117,22 @@ def ar1_correlation(r: np.ndarray, J: np.ndarray) -> float:
     if ratio(hi) <= observed:
         return hi
     return float(brentq(lambda rho: ratio(rho) - observed, lo, hi, xtol=1e-10))
+
+
+def ar1_scale(blocks_J, rhos) -> float:
+    """The factor c that makes s² = Σr²/(n - p) the AR(1) noise's σ²: the fit absorbs the slow
+    part of correlated noise, so E[Σr²] = σ² Σ tr(M R M) over the traces, less than σ² (n - p).
+    c = Σ (n_b - rank_b) / Σ tr(M_b R(ρ_b) M_b), M_b the projection off trace b's columns and
+    its constant (the projection :func:`ar1_correlation` uses; c = 1 at ρ = 0). Guarded: ρ is
+    taken at most ``SCALE_CORRELATION`` here. Above it a correlation that long is as likely the
+    model's misfit or drift as noise (a real AFM curve's residuals reach ρ̂ = 0.99), and the
+    unguarded factor grows without bound as ρ → 1 (tr(M R M) → 0)."""
+    plain = corrected = 0.0
+    for J, rho in zip(blocks_J, rhos, strict=True):
+        q = _fit_basis(J)
+        plain += q.shape[0] - q.shape[1]
+        corrected += _projected_trace(q, min(rho, SCALE_CORRELATION))
+    return plain / corrected if corrected > 0 else 1.0
 
 
 def _blocks(sizes):
@@ -157,6 +183,7 @@ def summarise(r, J, sizes, labels, *, noise="auto", solver_error=None) -> dict:
     use = noise if noise != "auto" else ("ar1" if correlated else "white")
     parts = {"white": cov_white}
     noise_rhos = []  # the noise's ρ per trace, corrected for what the fit absorbs (AR(1) only)
+    noise_scale = 1.0  # and what it absorbs of the noise's variance (ar1_scale)
     if use == "ar1" and not finite:
         cov_noise = parts["ar1"] = np.full_like(A, np.nan)
     elif use == "ar1":
@@ -165,7 +192,8 @@ def summarise(r, J, sizes, labels, *, noise="auto", solver_error=None) -> dict:
             Jb = J[s : s + k]
             noise_rhos.append(ar1_correlation(r[s : s + k], Jb))
             meat += Jb.T @ ar1_correlated(Jb, noise_rhos[-1])
-        cov_noise = s2 * inv @ meat @ inv
+        noise_scale = ar1_scale([J[s : s + k] for s, k in blocks], noise_rhos)
+        cov_noise = noise_scale * s2 * inv @ meat @ inv
         parts["ar1"] = cov_noise
     else:
         cov_noise = cov_white
@@ -196,7 +224,8 @@ def summarise(r, J, sizes, labels, *, noise="auto", solver_error=None) -> dict:
     stats = dict(
         n_samples=int(n), n_parameters=int(p), dof=int(dof), chi2=chi2, reduced_chi2=s2,
         autocorrelation_lag1=rho, durbin_watson=float(np.sum(np.diff(rr) ** 2) / max(chi2, 1e-300)),
-        noise_model=use, noise_correlation=noise_rho, n_effective=float(n_eff),
+        noise_model=use, noise_correlation=noise_rho, noise_scale=float(noise_scale),
+        n_effective=float(n_eff),
         **information(chi2, n, p),
     )
     return dict(

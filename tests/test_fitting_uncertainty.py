@@ -55,7 +55,7 @@ def test_ar1_noise_is_detected_and_its_errors_cover_the_truth():
 
 
 def test_ar1_sandwich_is_exact_for_a_linear_model():
-    """For a linear model y = Xβ + AR(1) noise the sandwich s²(XᵀX)⁻¹XᵀRX(XᵀX)⁻¹ equals the
+    """For a linear model y = Xβ + AR(1) noise the sandwich c s²(XᵀX)⁻¹XᵀRX(XᵀX)⁻¹ equals the
     covariance of the estimate computed from the explicit correlation matrix (no fit)."""
     n, rho = 400, 0.7
     t = np.linspace(0, 1, n)
@@ -69,23 +69,27 @@ def test_ar1_sandwich_is_exact_for_a_linear_model():
     s2 = out["stats"]["reduced_chi2"]
     noise_rho = _stats.ar1_correlation(r, X)
     R_hat = noise_rho ** np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
-    np.testing.assert_allclose(out["parts"]["ar1"], s2 * inv @ X.T @ R_hat @ X @ inv, rtol=1e-8)
+    scale = out["stats"]["noise_scale"]
+    assert scale == _stats.ar1_scale([X], [noise_rho])
+    np.testing.assert_allclose(out["parts"]["ar1"], scale * s2 * inv @ X.T @ R_hat @ X @ inv,
+                               rtol=1e-8)
     assert np.all(np.diag(exact) > np.diag(inv))  # positive correlation inflates the variance
 
 
 def test_ar1_correlation_undoes_what_the_fit_absorbs():
     """A fit absorbs the slow part of AR(1) noise, so its residuals' lag-1 autocorrelation
-    understates the noise's ρ; ``ar1_correlation`` (the ρ whose projected residuals show the
-    observed lag-1 ratio) is unbiased to within its scatter. 400 draws of n = 100, ρ = 0.8,
-    a three-column linear model: the raw lag-1 averages 0.71, the corrected 0.79 (± 0.004); the
-    sandwich's rms z of the three coefficients falls from 1.50 to 1.29, its 2σ coverage rises
-    from 82 to 89 % (σ² stays the residuals' s², which the fit also shrinks: the rest)."""
+    understates the noise's ρ and Σr²/(n - p) its σ²; ``ar1_correlation`` (the ρ whose
+    projected residuals show the observed lag-1 ratio) is unbiased to within its scatter, and
+    ``ar1_scale`` restores the variance. 400 draws of n = 100, ρ = 0.8, a three-column linear
+    model: the raw lag-1 averages 0.71, the corrected 0.79 (± 0.004); the sandwich's rms z of
+    the three coefficients is 1.50 with the raw ρ, 1.29 with the corrected, 1.14 with the scale
+    too, its 2σ coverage 82, 89 and 91 %."""
     n, rho, draws = 100, 0.8, 400
     rng = np.random.default_rng(3)
     t = np.linspace(0, 3, n)
     X = np.stack([1 - np.exp(-t), t * np.exp(-t), np.exp(-3 * t) * np.sin(2 * t)], axis=1)
     inv = np.linalg.inv(X.T @ X)
-    raw, corrected, z_raw, z_corrected = [], [], [], []
+    raw, corrected, z = [], [], {"raw": [], "corrected": [], "scaled": []}
     for _ in range(draws):
         e = np.empty(n)
         e[0] = rng.normal()
@@ -96,14 +100,33 @@ def test_ar1_correlation_undoes_what_the_fit_absorbs():
         raw.append(_stats.lag1(r))
         corrected.append(_stats.ar1_correlation(r, X))
         s2 = r @ r / (n - 3)
-        for q, z in ((raw[-1], z_raw), (corrected[-1], z_corrected)):
-            cov = s2 * inv @ (X.T @ _stats.ar1_correlated(X, q)) @ inv
-            z.append(x / np.sqrt(np.diag(cov)))
+        scale = _stats.ar1_scale([X], [corrected[-1]])
+        for q, c, key in ((raw[-1], 1.0, "raw"), (corrected[-1], 1.0, "corrected"),
+                          (corrected[-1], scale, "scaled")):
+            cov = c * s2 * inv @ (X.T @ _stats.ar1_correlated(X, q)) @ inv
+            z[key].append(x / np.sqrt(np.diag(cov)))
     scatter = np.std(corrected) / np.sqrt(draws)
     assert abs(np.mean(corrected) - rho) < 3 * scatter + 0.01
     assert np.mean(raw) < rho - 0.05  # what it corrects
-    rms = [np.sqrt(np.mean(np.square(z))) for z in (z_raw, z_corrected)]
-    assert rms[1] < rms[0] - 0.05
+    rms = {k: np.sqrt(np.mean(np.square(v))) for k, v in z.items()}
+    assert rms["corrected"] < rms["raw"] - 0.05
+    assert rms["scaled"] < rms["corrected"] - 0.05
+    # the rms z of 1200 values is known to ~2 %; what is left is s²'s own scatter (70
+    # effective degrees of freedom), which the normal quantiles do not allow for
+    assert 1.0 < rms["scaled"] < 1.2
+    assert np.mean(np.abs(np.asarray(z["scaled"])) < 2) > 0.9
+
+
+def test_ar1_scale_is_one_for_white_noise_and_guarded_near_one():
+    """ρ = 0: the factor is 1 (the white s² is unbiased). ρ → 1: E[Σr²] → 0 with the fit's
+    constant column absorbing everything, so the unguarded factor has no bound; it is taken at
+    ρ = SCALE_CORRELATION from there on."""
+    t = np.linspace(0, 1, 200)
+    X = np.stack([t, np.exp(-3 * t)], axis=1)
+    assert _stats.ar1_scale([X], [0.0]) == pytest.approx(1.0, rel=1e-12)
+    cap = _stats.ar1_scale([X], [_stats.SCALE_CORRELATION])
+    assert _stats.ar1_scale([X], [0.99]) == cap
+    assert 1.0 < _stats.ar1_scale([X], [0.5]) < cap < 3.0
 
 
 def test_solver_error_enters_as_its_parameter_shift():
