@@ -24,11 +24,12 @@ import argparse
 import os
 import shlex
 import sys
+import time
 
 from .machine import describe, label, median_range, write_report
 
 __all__ = ["DATA", "OUT", "ROOT", "command", "describe", "label", "median_range", "parse",
-           "parser", "pin_threads", "write_report"]
+           "parser", "pin_threads", "timed", "write_report"]
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "benchmarks", "out")
@@ -96,3 +97,19 @@ def command(argv=None) -> str:
     ARGS`` (``argv`` default: this process's arguments)."""
     args = sys.argv[1:] if argv is None else list(argv)
     return " ".join([_prog(), *map(shlex.quote, args)])
+
+
+def timed(fn, *args, repeat: int = 3):
+    """``fn(*args)`` once cold, then ``repeat`` times warm (each to ``jax.block_until_ready``):
+    (its output, the first call's seconds, the best warm call's seconds)."""
+    import jax  # not at import: pin_threads must run before JAX starts its CPU backend
+
+    start = time.perf_counter()
+    out = jax.block_until_ready(fn(*args))
+    first = time.perf_counter() - start
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        times.append(time.perf_counter() - start)
+    return out, first, min(times)

@@ -209,13 +209,7 @@ def derivative_map(args, argv):
 
 
 def _best(fn, *args, repeat=3):
-    jax.block_until_ready(fn(*args))
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        times.append(time.perf_counter() - start)
-    return min(times)
+    return _harness.timed(fn, *args, repeat=repeat)[2]
 
 
 def cost(args, argv):

@@ -13,26 +13,12 @@ to the last bit. Writes benchmarks/out/vmap_vs_sweep.md.
 
 from __future__ import annotations
 
-import time
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 import lubjax
 from benchmarks import _harness
-
-
-def _timed(fn, *args, repeat=3):
-    start = time.perf_counter()
-    out = jax.block_until_ready(fn(*args))
-    first = time.perf_counter() - start
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        times.append(time.perf_counter() - start)
-    return out, first, min(times)
 
 
 def main(argv=None):
@@ -56,22 +42,22 @@ def main(argv=None):
     rows = []
     swept = lubjax.sweep(np.asarray(betas), np.full(args.batch, z0), t_end, settings=settings,
                          times=plan.t)
-    _, _, sweep_s = _timed(lambda: lubjax.sweep(np.asarray(betas), np.full(args.batch, z0),
+    _, _, sweep_s = _harness.timed(lambda: lubjax.sweep(np.asarray(betas), np.full(args.batch, z0),
                                                 t_end, settings=settings, times=plan.t).force)
     rows.append(("`sweep`", swept.compile_s, sweep_s, "—"))
     one = jax.jit(curve)
     alone = np.stack([np.asarray(one(b)) for b in betas])
-    _, _, loop_s = _timed(lambda: [one(b) for b in betas])
+    _, _, loop_s = _harness.timed(lambda: [one(b) for b in betas])
     for name, fn in (("`jit(vmap(force_curve))`", curve), ("`jit(vmap(relax(...).at))`", relaxed)):
-        out, first, warm = _timed(jax.jit(jax.vmap(fn)), betas)
+        out, first, warm = _harness.timed(jax.jit(jax.vmap(fn)), betas)
         same = "yes" if np.array_equal(np.asarray(out), alone) else (
             f"no, {np.nanmax(np.abs(np.asarray(out) - alone)):.1e} of F̄")
         rows.append((name, first - warm, warm, same))
     rows.append(("jitted `force_curve`, one at a time", float("nan"), loop_s, "—"))
     grad_one = jax.jit(jax.grad(peak))
     grads_alone = np.array([float(grad_one(b)) for b in betas])
-    _, _, grad_loop_s = _timed(lambda: [grad_one(b) for b in betas])
-    out, first, warm = _timed(jax.jit(jax.vmap(jax.grad(peak))), betas)
+    _, _, grad_loop_s = _harness.timed(lambda: [grad_one(b) for b in betas])
+    out, first, warm = _harness.timed(jax.jit(jax.vmap(jax.grad(peak))), betas)
     same = "yes" if np.array_equal(np.asarray(out), grads_alone) else (
         f"no, {np.max(np.abs(np.asarray(out) / grads_alone - 1)):.1e} relative")
     rows.append(("`jit(vmap(grad(F̄(5))))`", first - warm, warm, same))

@@ -350,15 +350,15 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
     se = np.sqrt(np.diag(cov_theta))
     corr = cov_theta / np.outer(se, se)
     held = _undetermined_names(values, stderr, fixed)
-    held_at_bound = _held_map(spec.names, active, cov_theta, held)
+    held_map = _held_map(spec.names, active, cov_theta, held)
     free_stderr = stderr
-    if held_at_bound is not None:
-        stderr = errors_of(held_at_bound @ cov_theta @ held_at_bound.T)
+    if held_map is not None:
+        stderr = errors_of(held_map @ cov_theta @ held_map.T)
     parts = {}
     for part, cov in summary["parts"].items():
         c = M @ cov @ M.T
-        if held_at_bound is not None:
-            c = held_at_bound @ c @ held_at_bound.T
+        if held_map is not None:
+            c = held_map @ c @ held_map.T
         parts[part] = {n: float(abs(deriv[i]) * math.sqrt(max(c[i, i], 0.0)))
                        for i, n in enumerate(spec.names) if active[i]}
     n = trace.time.size
@@ -383,8 +383,8 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
         )
     if not outcome.converged:
         flags.append("fit did not converge: treat the values and errors as unreliable")
-    flags += _undetermined(values, free_stderr, fixed)
-    if held_at_bound is not None:
+    flags += _undetermined(held, values, free_stderr)
+    if held_map is not None:
         others = [n for i, n in enumerate(spec.names)
                   if active[i] and n not in held and n != "offset"]
         flags.append(
@@ -465,10 +465,10 @@ def _held_map(names, active, cov, held):
     return T
 
 
-def _undetermined(values, stderr, fixed) -> list[str]:
-    """A flag for each parameter of :func:`_undetermined_names`."""
+def _undetermined(names, values, stderr) -> list[str]:
+    """A flag for each of ``names`` (:func:`_undetermined_names`)."""
     out = []
-    for name in _undetermined_names(values, stderr, fixed):
+    for name in names:
         value = values[name]
         hint = (" (a near-dry contact: the film's force is below the noise; fix it where the "
                 "medium is known, --fix viscosity=...)") if name == "viscosity" else ""
