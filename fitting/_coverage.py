@@ -12,6 +12,7 @@ import numpy as np
 
 from ._fit import fit_traces
 from ._model import FIT_SETTINGS
+from ._profile import LEVELS
 from ._scales import drive_of
 
 
@@ -66,7 +67,9 @@ def coverage(draws, truth, settings=FIT_SETTINGS, **fit_kwargs):
     Returns:
         dict: ``table`` (per parameter of ``truth``: ``rms_z`` of the reported errors,
         ``within_1sigma`` and ``within_2sigma``, the fractions of draws with |z| ≤ 1 and ≤ 2
-        (honest errors: 68 % and 95 %), ``rms_z_white`` of their white-noise part alone,
+        (honest errors: 68 % and 95 %) or, where the data bound the parameter from one side,
+        with the truth inside its profile interval (``profiled``: how many; ``rms_z`` is then
+        over the others), ``rms_z_white`` of their white-noise part alone,
         ``mean_bias_over_se``,
         ``scatter_over_se`` and ``solver_over_se``, each over the mean reported error),
         ``converged`` (how many), ``n``, ``noise_models`` (those chosen), ``lag1`` (the mean
@@ -82,10 +85,18 @@ def coverage(draws, truth, settings=FIT_SETTINGS, **fit_kwargs):
         solver = np.array([r.stats["error_parts"].get("solver", {}).get(name, 0.0)
                            for r in results])
         z = (est - true) / se
+        within = {key: np.abs(z) <= level for key, level in LEVELS.items()}
+        # where the data bound the parameter from one side, its interval is the profile's
+        profiled = np.array([name in r.stats.get("intervals", {}) for r in results])
+        for i in np.flatnonzero(profiled):
+            interval = results[i].stats["intervals"][name]
+            for key in LEVELS:
+                within[key][i] = interval[key][0] <= true <= interval[key][1]
         table[name] = dict(
-            rms_z=float(np.sqrt(np.mean(z**2))),
-            within_1sigma=float(np.mean(np.abs(z) <= 1.0)),
-            within_2sigma=float(np.mean(np.abs(z) <= 2.0)),
+            rms_z=float(np.sqrt(np.mean(z[~profiled] ** 2))) if (~profiled).any() else np.nan,
+            within_1sigma=float(np.mean(within["1sigma"])),
+            within_2sigma=float(np.mean(within["2sigma"])),
+            profiled=int(profiled.sum()),
             rms_z_white=float(np.sqrt(np.mean(((est - true) / white) ** 2))),
             mean_bias_over_se=float(np.mean(est - true) / np.mean(se)),
             scatter_over_se=float(np.std(est, ddof=1) / np.mean(se)),

@@ -21,7 +21,7 @@ import numpy as np
 import lubjax
 from lubjax._fitting_api import sharding as _sharding
 
-from . import _adequacy, _checks, _model, _scales, _stats
+from . import _adequacy, _checks, _model, _profile, _scales, _stats
 from ._model import ModelSpec
 from ._optimisers import METHODS, OPTIMISERS
 from ._problem import Evaluator, fit_mesh, make_layout, solver_error, stack_traces
@@ -53,7 +53,11 @@ class FitResult(NamedTuple):
             residuals'), noise_correlation (the noise's, AR(1) only), noise_scale (the AR(1)
             noise's variance over the reduced chi-square; 1 otherwise), n_effective,
             rms_residual, condition, max_correlation, error_parts, ...;
-            ``fitting._stats.summarise``).
+            ``fitting._stats.summarise``); where the data bound a parameter from one side
+            (η near dry: its standard error exceeds it), ``undetermined`` (their names) and
+            ``intervals``, {name: {"1sigma": (lo, hi), "2sigma": (lo, hi)}} [SI] from the
+            profile of χ² (``fitting._profile``; lo = 0 where the interval reaches the dry
+            limit).
         converged: whether the optimiser converged (the first flag says how).
         identifiable: whether the parameters are identifiable: max |correlation| and the
             condition number within ``fitting._stats``' limits.
@@ -269,8 +273,11 @@ def fit_traces(
             progress(f"iteration {it}, chi2/2 {float(np.max(cost)):.6g}, "
                      f"{int(np.sum(done))}/{len(done)} done")
 
+    floors = [[j for j, label in enumerate(labels) if label.split("[")[0] in _profile.BOUNDED_BELOW]
+              for labels in layout.labels]
     outcomes = OPTIMISERS[method](evaluate, x0s, n_samples, max_iter=max_iter, tol=tol,
-                                   progress=report)
+                                   progress=report, **(dict(floors=floors) if method == "lm"
+                                                       else {}))
     xs = [o.x for o in outcomes]
     # The model at the optimum from its residuals (r = w (y - y_data)/σ): no separate prediction
     # function to trace, lower and load from the compilation cache.
@@ -288,20 +295,23 @@ def fit_traces(
         for j, t in enumerate(members):
             own = errors[k][j * n_pad : j * n_pad + traces[t].time.size]
             model_errors[t] = own * float(data.noise[t])
+    summaries = [
+        _stats.summarise(o.r, o.J, [(n_pad, traces[t].time.size) for t in members],
+                         layout.labels[k], noise=noise,
+                         solver_error=None if errors is None else errors[k])
+        for k, (o, members) in enumerate(zip(outcomes, groups, strict=True))]
+    intervals = _profile.one_sided_intervals(evaluate, outcomes, summaries, floors, progress)
     wall = (time.perf_counter() - t0) / len(traces)
     results = []
     for k, members in enumerate(groups):
-        o = outcomes[k]
-        summary = _stats.summarise(o.r, o.J, [(n_pad, traces[t].time.size) for t in members],
-                                   layout.labels[k], noise=noise,
-                                   solver_error=None if errors is None else errors[k])
+        o, summary = outcomes[k], summaries[k]
         for j, t in enumerate(members):
             joint = shared if len(members) > 1 else ()
             start = _start_used(starts[t], spec, layout, t, x0s[k], scales[t], joint)
             results.append(_trace_result(traces[t], spec, scales[t], start, layout, t, o,
                                          summary, j, members, names, shared, method,
                                          evaluate.runs, wall, model[t, : traces[t].time.size],
-                                         fixed, model_errors[t]))
+                                         fixed, model_errors[t], intervals[k]))
     return results
 
 
@@ -326,7 +336,8 @@ def _short_name(path):
 
 
 def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, members, names,
-                  shared, method, runs, wall, model, fixed=None, model_error=None) -> FitResult:
+                  shared, method, runs, wall, model, fixed=None, model_error=None,
+                  intervals=None) -> FitResult:
     """Map a problem's x, covariance and statistics onto trace t's parameters (SI), and judge
     whether the model describes the trace (``fitting._adequacy``)."""
     M = layout.M[t]
@@ -349,8 +360,8 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
     stderr = errors_of(cov_theta)
     se = np.sqrt(np.diag(cov_theta))
     corr = cov_theta / np.outer(se, se)
-    held = _undetermined_names(values, stderr, fixed)
-    held_map = _held_map(spec.names, active, cov_theta, held)
+    held = _profile.undetermined_names(values, stderr, fixed)
+    held_map = _profile.held_map(spec.names, active, cov_theta, held)
     free_stderr = stderr
     if held_map is not None:
         stderr = errors_of(held_map @ cov_theta @ held_map.T)
@@ -365,6 +376,9 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
     first = sum(length for length, _ in summary["sizes"][:j])
     r_t = outcome.r[first : first + n]
     stats = dict(summary["stats"])
+    profiled = _profile.physical_intervals(spec.names, M, intervals or {})
+    if profiled:
+        stats["intervals"] = profiled
     stats.update(
         rms_residual=float(np.sqrt(np.mean((model - _channel(trace, spec)) ** 2))),
         autocorrelation_lag1_trace=float(_stats.lag1(r_t)),
@@ -383,7 +397,7 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
         )
     if not outcome.converged:
         flags.append("fit did not converge: treat the values and errors as unreliable")
-    flags += _undetermined(held, values, free_stderr)
+    flags += _profile.undetermined_flags(held, values, free_stderr, profiled)
     if held_map is not None:
         others = [n for i, n in enumerate(spec.names)
                   if active[i] and n not in held and n != "offset"]
@@ -392,8 +406,11 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
             + ", ".join(f"{n} ± {free_stderr[n]:.3g}" for n in others) + f"): {held[0]} cannot "
             "fall below 0, so its spread is one-sided and theirs follows it only in part")
     flags += summary["flags"]
+    if held:
+        stats["undetermined"] = list(held)
+    # an undetermined value (η at the dry limit) says nothing of the units
     flags += _checks.plausibility_flags(
-        {n: v for n, v in values.items() if n not in fixed}, scales.speed,
+        {n: v for n, v in values.items() if n not in fixed and n not in held}, scales.speed,
         _checks.e_star_range(trace.metadata))
     adequacy = judge_adequacy(trace, spec, scales, model, int(np.count_nonzero(M.any(axis=1))),
                               model_error)
@@ -434,47 +451,6 @@ def judge_adequacy(trace, spec, scales, model, n_params, model_error=None):
                            model_error=model_error, viscoelastic=spec.viscoelastic,
                            layer=spec.layer is not None, drive=spec.drive,
                            metadata=trace.metadata)
-
-
-def _undetermined_names(values, stderr, fixed) -> list[str]:
-    """The positive parameters whose standard error exceeds them: the data bound them from above
-    only (the viscosity of a near-dry trace, whose film force is below the noise)."""
-    return [name for name, value in values.items()
-            if name != "offset" and name not in fixed and value > 0 and stderr[name] > value]
-
-
-def _held_map(names, active, cov, held):
-    """The linear map of the fit's errors e ↦ e_o - B e_u (B = Cov_ou Cov_uu⁻¹, u the
-    parameters in ``held``, o the other active ones; e_u kept): applied to a covariance it gives
-    the others' errors conditional on the held ones. None when nothing is held.
-
-    Why: an undetermined positive parameter (η near dry) is bounded below by 0, so its spread is
-    one-sided, mostly at the bound, while its linearised error is a symmetric Gaussian that the
-    others' errors share through their correlation (0.85-0.93 for E* and z0 near dry). Over 20
-    near-dry noise draws their marginal errors were twice their scatter (rms z 0.51) and the
-    conditional ones calibrated (rms z 0.96 and 1.18; docs/accuracy.md)."""
-    if not held:
-        return None
-    u = [names.index(n) for n in held]
-    o = [i for i in range(len(names)) if active[i] and i not in u]
-    cov_uu = cov[np.ix_(u, u)]
-    if not (np.all(np.isfinite(cov_uu)) and np.all(np.isfinite(cov[np.ix_(o, u)]))):
-        return None
-    T = np.eye(len(names))
-    T[np.ix_(o, u)] = -cov[np.ix_(o, u)] @ np.linalg.pinv(cov_uu)
-    return T
-
-
-def _undetermined(names, values, stderr) -> list[str]:
-    """A flag for each of ``names`` (:func:`_undetermined_names`)."""
-    out = []
-    for name in names:
-        value = values[name]
-        hint = (" (a near-dry contact: the film's force is below the noise; fix it where the "
-                "medium is known, --fix viscosity=...)") if name == "viscosity" else ""
-        out.append(f"{name} is not determined by the data: its standard error is "
-                   f"{100 * stderr[name] / value:.0f} % of it; read it as an upper bound{hint}")
-    return out
 
 
 def _start_used(start, spec, layout, t, x0, scales, shared) -> Start:

@@ -116,6 +116,20 @@ class Evaluator:
             out = fn(theta, data, solver, active)
             return tuple(_sharding.to_host(a)[: self.n_traces] for a in out)
 
+    def residuals(self, xs, k):
+        """Problem k's residuals at x from the response alone (no Jacobian: about a quarter of
+        a run with it), or None where the run fails (a negative film or a non-finite value)."""
+        active = np.zeros(self.n_traces, bool)
+        active[self.groups[k]] = True
+        y, film = self.run(self.thetas(xs), fn=self.batched(1, "predict"), active=active)
+        self.runs += 1
+        members = self.groups[k]
+        d = self.data
+        r = np.concatenate([np.asarray(d.weight[t] * (y[t] - d.response[t]) / d.noise[t])
+                            for t in members])
+        ok = bool(np.isfinite(r).all() and all(film[t] > 0 for t in members))
+        return r if ok else None
+
     def thetas(self, xs):
         lay = self.layout
         return np.stack([lay.base[t] + lay.M[t] @ xs[lay.problem[t]] for t in range(len(lay.M))])

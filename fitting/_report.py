@@ -113,7 +113,11 @@ def result_to_dict(res: FitResult) -> dict:
         time_scale_s=res.scales.time_scale,
         radius_m=res.scales.radius,
         **{f"rms_residual_{resp_unit}": res.rms_residual},
-        statistics={k: v for k, v in res.stats.items() if k != "error_parts"},
+        statistics={k: v for k, v in res.stats.items() if k not in ("error_parts", "intervals")},
+        # a parameter the data bound from one side: its profile-χ² interval (None: unbounded)
+        intervals={units(res, n)[0]: {key: [_finite(b) for b in bounds]
+                                      for key, bounds in levels.items()}
+                   for n, levels in res.stats.get("intervals", {}).items()},
         converged=res.converged,
         identifiable=res.identifiable,
         condition_number=res.stats.get("condition"),
@@ -124,7 +128,8 @@ def result_to_dict(res: FitResult) -> dict:
         flags=list(res.flags),
         fixed=list(res.fixed or ()),
         plausible=not plausibility_flags(
-            {n: v for n, v in res.values.items() if n not in (res.fixed or ())}, res.scales.speed,
+            {n: v for n, v in res.values.items() if n not in (res.fixed or ())
+             and n not in res.stats.get("undetermined", ())}, res.scales.speed,
             e_star_range(res.metadata)) and not (res.adequacy and res.adequacy.ok is False),
         adequacy=None if res.adequacy is None else res.adequacy.to_dict(),
         start={**{units(res, n)[0]: res.start.values[n] for n in names},
@@ -165,7 +170,16 @@ def _value_line(res, n):
     t = truth(res).get(n)
     if t is not None and res.stderr[n] > 0:
         line += f"  [true {t / scale:.5g}, z = {(res.values[n] - t) / res.stderr[n]:+.2f}]"
+    interval = res.stats.get("intervals", {}).get(n)
+    if interval is not None:
+        line += "\n" + " " * 23 + "profile of chi2: " + ", ".join(
+            f"{_interval_text(interval[key], scale)} at {key[0]} sigma" for key in interval)
     return line
+
+
+def _interval_text(bounds, scale=1.0) -> str:
+    lo, hi = bounds[0] / scale, bounds[1] / scale
+    return f"< {hi:.3g}" if lo == 0 else f"{lo:.3g} to {hi:.3g}"
 
 
 def fit_report(res: FitResult, min_correl: float = 0.1) -> str:
@@ -282,6 +296,9 @@ def short_value(res: FitResult, n: str) -> str:
     if n in (res.fixed or ()):
         return f"{v:.4g} {unit} (fixed)" if unit else f"{v:.4g} (fixed)"
     text = f"{v:.4g} ± {e:.2g}" if not math.isnan(e) else f"{v:.4g}"
+    interval = res.stats.get("intervals", {}).get(n)
+    if interval is not None:  # the data bound it from one side: its profile interval instead
+        text = f"{_interval_text(interval['2sigma'], scale)} (2 sigma)"
     return f"{text} {unit}" if unit else text
 
 

@@ -428,9 +428,12 @@ def test_near_dry_trace_gives_e_star_and_z0_and_leaves_the_viscosity_open():
     at rtol 1e-6 (data/make_synthetic.py). The force is Hertz's of the indentation to ~10⁻⁴
     (tests/test_near_dry.py) and the viscous force before contact is ~10⁻⁵ of the noise, so
     the trace bounds η only from above: E* and z0 come out within 3σ of the truth and to < 1 %,
-    and η's standard error exceeds η itself (the report's sign that η is not determined)."""
+    η's standard error exceeds η itself (the report's sign that η is not determined), and η's
+    interval is the profile of χ² (fitting._profile): from 0 (the dry limit) to an upper bound
+    above the truth, as the summary line and the flag say."""
     tr = read_data("water_dc140")
     res = fitting.fit_trace(tr)
+    assert res.converged
     _assert_recovers(res, tr)
     for name in ("E_star", "z0"):
         assert res.stderr[name] < 0.01 * res.values[name]
@@ -438,6 +441,11 @@ def test_near_dry_trace_gives_e_star_and_z0_and_leaves_the_viscosity_open():
     assert [f for f in res.flags if "not determined" in f] == [
         f for f in res.flags if f.startswith("viscosity is not determined by the data")]
     assert any(f.startswith("viscosity is not determined") for f in res.flags)
+    interval = res.stats["intervals"]["viscosity"]
+    true_eta = float(tr.metadata["true_viscosity_Pa_s"])
+    assert interval["1sigma"][0] == interval["2sigma"][0] == 0.0
+    assert true_eta < interval["1sigma"][1] < interval["2sigma"][1] < 1.0
+    assert f"< {interval['2sigma'][1]:.3g} (2 sigma) Pa s" in fitting.summary_line(res)
 
 
 @pytest.mark.slow

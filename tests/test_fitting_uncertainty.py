@@ -196,7 +196,7 @@ def test_errors_held_at_an_undetermined_parameter_are_the_conditional_ones():
     """An undetermined positive parameter (standard error above its value) is held: the
     others' covariance becomes the Schur complement Cov_oo - Cov_ou Cov_uu⁻¹ Cov_uo, its own
     row is kept, and nothing is held when every parameter is determined."""
-    from fitting._fit import _held_map, _undetermined_names
+    from fitting._profile import held_map, undetermined_names
 
     names = ("E_star", "viscosity", "z0", "offset")
     cov = np.array([[4.0, 3.0, 1.0, 0.1], [3.0, 9.0, 2.0, 0.0], [1.0, 2.0, 2.0, 0.2],
@@ -204,12 +204,12 @@ def test_errors_held_at_an_undetermined_parameter_are_the_conditional_ones():
     active = np.array([True, True, True, True])
     values = dict(E_star=4e6, viscosity=1e-3, z0=7e-5, offset=0.0)
     stderr = dict(E_star=1e4, viscosity=3e-3, z0=2e-7, offset=1e-4)
-    assert _undetermined_names(values, stderr, {}) == ["viscosity"]
-    assert _undetermined_names(values, stderr, {"viscosity": 1e-3}) == []
-    T = _held_map(names, active, cov, ["viscosity"])
+    assert undetermined_names(values, stderr, {}) == ["viscosity"]
+    assert undetermined_names(values, stderr, {"viscosity": 1e-3}) == []
+    T = held_map(names, active, cov, ["viscosity"])
     held = T @ cov @ T.T
     o = [0, 2, 3]
     schur = cov[np.ix_(o, o)] - np.outer(cov[o, 1], cov[1, o]) / cov[1, 1]
     np.testing.assert_allclose(held[np.ix_(o, o)], schur, rtol=1e-12)
     assert held[1, 1] == cov[1, 1]
-    assert _held_map(names, active, cov, []) is None
+    assert held_map(names, active, cov, []) is None

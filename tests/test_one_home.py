@@ -251,8 +251,8 @@ def test_each_fitting_module_says_its_one_job_in_its_first_line_and_stays_short(
 
 #: fitting's modules from the bottom up: a reader following one fit goes down this list.
 FITTING_ORDER = ("_trace", "_columns", "_csv", "_afm", "_checks", "_stats", "_adequacy", "_cache",
-                 "_scales", "_model", "_start", "_problem", "_optimisers", "_fit", "_report",
-                 "_figure", "_compare", "_coverage", "_cli")
+                 "_scales", "_model", "_start", "_problem", "_profile", "_optimisers", "_fit",
+                 "_report", "_figure", "_compare", "_coverage", "_cli")
 
 
 def test_fitting_modules_import_only_the_ones_below_them():
