@@ -273,8 +273,7 @@ def fit_traces(
             progress(f"iteration {it}, chi2/2 {float(np.max(cost)):.6g}, "
                      f"{int(np.sum(done))}/{len(done)} done")
 
-    floors = [[j for j, label in enumerate(labels) if label.split("[")[0] in _profile.BOUNDED_BELOW]
-              for labels in layout.labels]
+    floors = _profile.floors_of(layout.labels)
     outcomes = OPTIMISERS[method](evaluate, x0s, n_samples, max_iter=max_iter, tol=tol,
                                    progress=report, **(dict(floors=floors) if method == "lm"
                                                        else {}))

@@ -124,9 +124,8 @@ class Evaluator:
         y, film = self.run(self.thetas(xs), fn=self.batched(1, "predict"), active=active)
         self.runs += 1
         members = self.groups[k]
-        d = self.data
-        r = np.concatenate([np.asarray(d.weight[t] * (y[t] - d.response[t]) / d.noise[t])
-                            for t in members])
+        r_all = scaled_residuals(self.data, y)
+        r = np.concatenate([r_all[t] for t in members])
         ok = bool(np.isfinite(r).all() and all(film[t] > 0 for t in members))
         return r if ok else None
 
@@ -155,6 +154,11 @@ class Evaluator:
                 film[t] > 0 for t in members))
             out.append((rk, Jk, ok))
         return out
+
+
+def scaled_residuals(data, y) -> np.ndarray:
+    """r = w (y - y_data)/σ of every trace of the stacked ``data`` at responses ``y``."""
+    return np.array(data.weight * (y - data.response) / data.noise[:, None])
 
 
 def fit_mesh(traces, starts, scales, spec, settings) -> lubjax.Mesh:
@@ -217,7 +221,7 @@ def solver_error(evaluate, xs, r_fit, traces, scales, spec, settings, mesh, grou
     # The response alone (no Jacobian): a forward run, a quarter of the cost and of the tracing.
     predict = evaluate.batched(1, "predict")
     y_loose = evaluate.run(evaluate.thetas(xs), evaluate.place(data, loose), predict)[0]
-    r_loose = np.array(data.weight * (y_loose - data.response) / data.noise[:, None])
+    r_loose = scaled_residuals(data, y_loose)
     # 8^{2/3} = 2^2: the one run's space and time errors grow alike, by 2^2
     err = _estimate.richardson(r_loose - r_fit, 2.0, _estimate.SMOOTH_SPACE_ORDER)
     err[~np.isfinite(err)] = 0.0

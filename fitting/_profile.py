@@ -188,6 +188,13 @@ def profile_interval(residuals, x_hat, r_hat, J_hat, j, s2, widen=1.0) -> dict:
 BOUNDED_BELOW = ("viscosity",)
 
 
+def floors_of(labels) -> list[list[int]]:
+    """Per problem (its x's ``labels``), the indices of the parameters of ``BOUNDED_BELOW``
+    (a joint fit's per-trace labels carry a "[trace]" suffix)."""
+    return [[j for j, label in enumerate(names) if label.split("[")[0] in BOUNDED_BELOW]
+            for names in labels]
+
+
 def undetermined_names(values, stderr, fixed) -> list[str]:
     """The positive parameters whose standard error exceeds them: the data bound them from above
     only (the viscosity of a near-dry trace, whose film force is below the noise)."""

@@ -14,6 +14,7 @@ from lubjax._fitting_api import files as _files
 
 from ._checks import e_star_range, plausibility_flags
 from ._fit import FitResult
+from ._profile import LEVELS
 
 #: (JSON key, display unit, display scale) of each parameter; the offset's depends on the channel.
 _UNITS = {
@@ -173,7 +174,7 @@ def _value_line(res, n):
     interval = res.stats.get("intervals", {}).get(n)
     if interval is not None:
         line += "\n" + " " * 23 + "profile of chi2: " + ", ".join(
-            f"{_interval_text(interval[key], scale)} at {key[0]} sigma" for key in interval)
+            f"{_interval_text(interval[key], scale)} at {LEVELS[key]:g} sigma" for key in interval)
     return line
 
 
