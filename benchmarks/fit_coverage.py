@@ -17,12 +17,13 @@ default ``fitting.FIT_SETTINGS``, on the trace cut to t̄ ≤ ``--t-bar``. Scene
 * near-dry: water_dc140 (PDMS under water, β = 5.4e6): η is bounded only from above.
 
 For each parameter, z = (estimate - truth)/reported error: honest errors put 68 % of the draws
-within 1σ and 95 % within 2σ (where the data bound a parameter from one side, η near dry, a
-draw counts as within kσ when the truth lies inside its profile-χ² interval at k σ, and its
-rms z is over the other draws; "profile intervals" says how many) (N = 50 draws scatter
-those fractions by ±7 % and ±3 %) and give rms z ≈ 1 (±0.1). The white-noise errors alone
-(no AR(1) sandwich, no solver error) are shown beside them. Writes ``--out`` (default
-benchmarks/out/fit_coverage.md) after every row.
+within 1σ and 95 % within 2σ (where the fit gives a parameter a profile-χ² interval, near
+dry η's and, through it, E*'s and z0's, a draw counts as within kσ when the truth lies inside
+its interval at k σ; η's one-sided intervals are left out of its rms z, E*'s and z0's z is
+over their 1σ interval's half on the truth's side; "profile intervals" says how many)
+(N = 50 draws scatter those fractions by ±7 % and ±3 %) and give rms z ≈ 1 (±0.1). The
+white-noise errors alone (no AR(1) sandwich, no solver error) are shown beside them. Writes
+``--out`` (default benchmarks/out/fit_coverage.md) after every row.
 """
 
 from __future__ import annotations

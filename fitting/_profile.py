@@ -27,6 +27,12 @@ it, on each side of the profile's lowest point, with √(Δχ²) a power of η b
 film's force is a power of η near dry; linear in x where the nearer point is the lowest); where
 it starts at the lowest point or is wider than ``STEP``/2, one more point at that estimate
 narrows it (at most ``REFINE``).
+
+The other parameters (E* and z0, correlated with η at +0.74 and +0.78 near dry) get intervals
+through η's profile (:func:`companion_intervals`): along its path each sits at its optimum
+given η, with its conditional error about it, so its interval reaches down to its dry value
+where η's reaches 0, asymmetric where a symmetric error would be too wide on one side and too
+narrow on the other.
 """
 
 from __future__ import annotations
@@ -130,7 +136,8 @@ def profile_interval(residuals, x_hat, r_hat, J_hat, j, s2, widen=1.0) -> dict:
         not reach the level (the profile flattened: the interval reaches the parameter's 0; or
         a run failed or the points ran out first: 0 is then the safe side), hi is +inf where
         the walk up did not (a failed run or the point budget);
-        ``"runs"``, the model runs taken.
+        ``"runs"``, the model runs taken; ``"path"``, the walk's points (x_j, χ², x) sorted by
+        x_j, x with the others moved (:func:`companion_intervals`).
     """
     chi2_hat = float(r_hat @ r_hat)
     s2 = max(s2, 1e-300)
@@ -181,6 +188,62 @@ def profile_interval(residuals, x_hat, r_hat, J_hat, j, s2, widen=1.0) -> dict:
         hi, lo = ends
         out[key] = (-math.inf if lo is None else lo, math.inf if hi is None else hi)
     out["runs"] = runs
+    out["path"] = path
+    return out
+
+
+def companion_intervals(path, j, s2, widen, cov, levels=None) -> dict:
+    r"""The intervals of the other parameters through x_j's profile: {i: {level: (lo, hi)}}.
+
+    Along the profile's path each other parameter o sits at its optimum o(x_j) given x_j, and
+    about it its spread is the conditional one, σ_c² = C_oo − C_oj² / C_jj (C the fit's
+    covariance, as reported). The profile of χ² in o is then (in reported errors)
+
+        P(o) = min over x_j of  D(x_j) + (o − o(x_j))² / σ_c²,    D = Δχ²_j / (s² c²),
+
+    and its k-σ interval, where P ≤ k², is the union over x_j of o(x_j) ± σ_c √(k² − D(x_j)):
+    for a Gaussian problem exactly ô ± k √(σ_c² + (∂o/∂x_j)² σ_j²), the marginal error. Where
+    x_j is bounded (η near dry: the profile flattens down to the dry limit, o goes to its dry
+    value) the interval is asymmetric: it reaches down to the others' dry values, which a
+    symmetric error built on η's linearised one cannot do. √D is interpolated linearly
+    between the path's points (exact where D is quadratic in x_j), o linearly.
+
+    Args:
+        path: the points (x_j, χ², x) of :func:`profile_interval`'s walk, sorted by x_j.
+        j: the profiled parameter's index in x.
+        s2: the reduced χ² at the optimum.
+        widen: c, x_j's reported error over its white-noise error (as in
+            :func:`profile_interval`).
+        cov: the fit's covariance of x, as reported.
+        levels: {key: k}, default ``LEVELS``.
+
+    Returns:
+        dict: per other index i whose conditional variance is positive, {key: (lo, hi)} in x.
+    """
+    levels = LEVELS if levels is None else levels
+    chi2 = np.array([p[1] for p in path])
+    xs = np.array([p[2] for p in path])
+    height = np.sqrt(np.maximum(chi2 - chi2.min(), 0.0) / max(s2, 1e-300)) / widen
+    # 32 points in each gap of the path
+    t = np.linspace(0.0, 1.0, 33)[:-1]
+    fine = np.append((np.arange(len(path) - 1)[:, None] + t).ravel(), len(path) - 1.0)
+    index = np.arange(len(path), dtype=float)
+    h = np.interp(fine, index, height)
+    out = {}
+    for i in range(xs.shape[1]):
+        if i == j or not np.isfinite(cov[i, i]) or cov[j, j] <= 0:
+            continue
+        conditional = cov[i, i] - cov[i, j] ** 2 / cov[j, j]
+        if not conditional > 0:
+            continue
+        o = np.interp(fine, index, xs[:, i])
+        sigma = math.sqrt(conditional)
+        found = {}
+        for key, k in levels.items():
+            inside = h <= k
+            half = sigma * np.sqrt(np.maximum(k * k - h[inside] ** 2, 0.0))
+            found[key] = (float(np.min(o[inside] - half)), float(np.max(o[inside] + half)))
+        out[i] = found
     return out
 
 
@@ -210,9 +273,10 @@ def held_map(names, active, cov, held):
     Why: an undetermined positive parameter (η near dry) is bounded below by 0, so its spread is
     one-sided, mostly at the bound, while its linearised error is a symmetric Gaussian that the
     others' errors share through their correlation (0.74-0.93 for E* and z0 near dry). Over 20
-    near-dry noise draws their marginal errors were twice their scatter (rms z 0.51); over 50
-    the conditional ones hold the truth within 2σ in 90-94 % (white), 86 % (AR(1)): a little
-    small, since a draw whose η lands high carries E* and z0 with it (docs/accuracy.md)."""
+    near-dry noise draws their marginal errors were twice their scatter (rms z 0.51); the
+    conditional ones are a little small, since a draw whose η lands high carries E* and z0 with
+    it, which their intervals through η's profile hold (:func:`companion_intervals`,
+    docs/accuracy.md)."""
     if not held:
         return None
     u = [names.index(n) for n in held]
@@ -230,6 +294,8 @@ def physical_intervals(names, M, intervals) -> dict:
     {name: {level: (lo, hi)}} in SI, 0 for a lower end at -inf."""
     out = {}
     for i, name in enumerate(names):
+        if name in ("offset", "stiffening"):  # not on a log scale
+            continue
         cols = np.flatnonzero(M[i])
         if cols.size == 1 and int(cols[0]) in intervals:
             found = intervals[int(cols[0])]
@@ -261,11 +327,12 @@ def undetermined_flags(names, values, stderr, intervals=None) -> list[str]:
 def one_sided_intervals(evaluate, outcomes, summaries, floors, progress=None):
     """Per problem, {x index: :func:`profile_interval`} of each parameter of ``floors`` whose
     reported error on its log scale exceeds 1 (it exceeds the value: the data bound it from
-    above only, :func:`undetermined_names`)."""
+    above only, :func:`undetermined_names`), and for the other parameters their intervals
+    through its profile (:func:`companion_intervals`)."""
     xs = [o.x for o in outcomes]
     out = []
     for k, (o, summary) in enumerate(zip(outcomes, summaries, strict=True)):
-        found = {}
+        found, companions = {}, {}
         cov, white = summary["covariance"], summary["parts"]["white"]
         for j in floors[k]:
             if not (np.isfinite(o.r).all() and cov[j, j] > 1.0 and white[j, j] > 0):
@@ -276,8 +343,17 @@ def one_sided_intervals(evaluate, outcomes, summaries, floors, progress=None):
             def residuals(x, k=k):
                 return evaluate.residuals([x if i == k else xi for i, xi in enumerate(xs)], k)
 
-            found[j] = profile_interval(
-                residuals, o.x, o.r, o.J, j, summary["stats"]["reduced_chi2"],
-                widen=math.sqrt(cov[j, j] / white[j, j]))
+            s2, widen = summary["stats"]["reduced_chi2"], math.sqrt(cov[j, j] / white[j, j])
+            found[j] = profile_interval(residuals, o.x, o.r, o.J, j, s2, widen)
+            path = found[j].pop("path")
+            if all(math.isfinite(found[j][key][1]) for key in LEVELS):
+                # (where the walk up stopped short, the others' upper path is unknown: they
+                # keep their conditional errors)
+                for i, levels in companion_intervals(path, j, s2, widen, cov).items():
+                    if i not in floors[k]:
+                        companions.setdefault(i, []).append(levels)
+        for i, each in companions.items():  # several profiled: the union of their intervals
+            found[i] = {key: (min(c[key][0] for c in each), max(c[key][1] for c in each))
+                        for key in LEVELS}
         out.append(found)
     return out

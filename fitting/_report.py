@@ -151,7 +151,7 @@ def result_to_dict(res: FitResult) -> dict:
         out["vs_true"] = {
             units(res, n)[0]: {
                 "true": v, "relative_error": res.values[n] / v - 1,
-                "z_score": (res.values[n] - v) / res.stderr[n] if res.stderr[n] > 0 else None,
+                "z_score": _sided_z(res, n, v) if res.stderr[n] > 0 else None,
             }
             for n, v in true.items()
         }
@@ -170,7 +170,7 @@ def _value_line(res, n):
             f"(init = {start:.5g}){tag}")
     t = truth(res).get(n)
     if t is not None and res.stderr[n] > 0:
-        line += f"  [true {t / scale:.5g}, z = {(res.values[n] - t) / res.stderr[n]:+.2f}]"
+        line += f"  [true {t / scale:.5g}, z = {_sided_z(res, n, t):+.2f}]"
     interval = res.stats.get("intervals", {}).get(n)
     if interval is not None:
         line += "\n" + " " * 23 + "profile of chi2: " + ", ".join(
@@ -180,7 +180,33 @@ def _value_line(res, n):
 
 def _interval_text(bounds, scale=1.0) -> str:
     lo, hi = bounds[0] / scale, bounds[1] / scale
-    return f"< {hi:.3g}" if lo == 0 else f"{lo:.3g} to {hi:.3g}"
+    if lo == 0:
+        return f"< {hi:.3g}"
+    digits = _digits(max(abs(lo), abs(hi)), hi - lo)
+    return f"{_shown(lo, digits)} to {_shown(hi, digits)}"
+
+
+def _digits(value, width) -> int:
+    """Significant digits that show ``width`` next to ``value`` to 2 digits (at least 3)."""
+    return max(3, 2 + math.ceil(math.log10(abs(value) / max(width, 1e-300))))
+
+
+def _shown(x, digits=2) -> str:
+    """``x`` to ``digits`` significant digits, trailing zeros kept (0.30, not 0.3)."""
+    return f"{x:#.{digits}g}".rstrip(".")
+
+
+def _sided_z(res, n, true):
+    """(value - truth) over the reported error, or over the 1σ interval's half on the truth's
+    side where the parameter has an interval through an undetermined one's profile (near dry:
+    E* and z0 through η's)."""
+    v = res.values[n]
+    interval = res.stats.get("intervals", {}).get(n)
+    if interval is not None and n not in res.stats.get("undetermined", ()):
+        lo, hi = interval["1sigma"]
+        half = v - lo if true < v else hi - v
+        return (v - true) / half if half > 0 else math.nan
+    return (v - true) / res.stderr[n]
 
 
 def fit_report(res: FitResult, min_correl: float = 0.1) -> str:
@@ -298,8 +324,12 @@ def short_value(res: FitResult, n: str) -> str:
         return f"{v:.4g} {unit} (fixed)" if unit else f"{v:.4g} (fixed)"
     text = f"{v:.4g} ± {e:.2g}" if not math.isnan(e) else f"{v:.4g}"
     interval = res.stats.get("intervals", {}).get(n)
-    if interval is not None:  # the data bound it from one side: its profile interval instead
+    if interval is not None and n in res.stats.get("undetermined", ()):
+        # the data bound it from one side: its profile interval instead
         text = f"{_interval_text(interval['2sigma'], scale)} (2 sigma)"
+    elif interval is not None:  # asymmetric, through η's profile near dry: the 1σ interval
+        lo, hi = interval["1sigma"][0] / scale, interval["1sigma"][1] / scale
+        text = f"{_shown(v, _digits(v, hi - lo))} +{_shown(hi - v)}/-{_shown(v - lo)}"
     return f"{text} {unit}" if unit else text
 
 
@@ -335,8 +365,9 @@ def summary_line(res: FitResult) -> str:
 
 
 def write_table(results, path: str) -> None:
-    """A CSV table of fits, one row per trace: fitted values, errors, statistics and flags
-    (written atomically).
+    """A CSV table of fits, one row per trace: fitted values, errors (and the 2σ ends of the
+    profile-χ² intervals where a fit has them: near dry), statistics and flags (written
+    atomically).
 
     Args:
         results: the :class:`FitResult` of each trace.
@@ -345,9 +376,11 @@ def write_table(results, path: str) -> None:
     names = []
     for r in results:
         names += [n for n in r.spec.names if n not in names]
+    # a parameter with a profile-χ² interval in any fit (near dry): its 2σ ends as well
+    profiled = [n for n in names if any(n in r.stats.get("intervals", {}) for r in results)]
     cols = ["trace", "drive", "substrate"]
     for n in names:
-        cols += [n, f"{n}_se"]
+        cols += [n, f"{n}_se"] + ([f"{n}_2sigma_lo", f"{n}_2sigma_hi"] if n in profiled else [])
     cols += ["beta", "z0_over_dc", "rms_residual", "reduced_chi2", "noise_model", "converged",
              "identifiable", "adequate", "adequacy_reduced_chi2", "n_iterations", "wall_s"]
     with _files.atomic_open(path, "w", newline="") as fh:
@@ -357,6 +390,9 @@ def write_table(results, path: str) -> None:
             row = [r.name, r.spec.drive, r.spec.substrate_label()]
             for n in names:
                 row += [r.values.get(n, ""), r.stderr.get(n, "")]
+                if n in profiled:
+                    interval = r.stats.get("intervals", {}).get(n)
+                    row += list(interval["2sigma"]) if interval else ["", ""]
             adequacy = r.adequacy
             row += [r.beta, r.z0_over_dc, r.rms_residual, r.stats["reduced_chi2"],
                     r.stats["noise_model"], r.converged, r.identifiable,

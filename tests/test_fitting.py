@@ -9,6 +9,7 @@ discretisation error.
 import dataclasses
 import json
 import math
+import re
 
 import jax
 import jax.numpy as jnp
@@ -446,6 +447,13 @@ def test_near_dry_trace_gives_e_star_and_z0_and_leaves_the_viscosity_open():
     assert interval["1sigma"][0] == interval["2sigma"][0] == 0.0
     assert true_eta < interval["1sigma"][1] < interval["2sigma"][1] < 1.0
     assert f"< {interval['2sigma'][1]:.3g} (2 sigma) Pa s" in fitting.summary_line(res)
+    # E* and z0: intervals through η's profile, holding the truth, wider than their errors with
+    # η held on the side η's spread carries them to
+    for name, true in (("E_star", tr.metadata["true_E_star_Pa"]), ("z0", tr.metadata["true_z0_m"])):
+        lo, hi = res.stats["intervals"][name]["2sigma"]
+        assert lo < float(true) < hi
+        assert max(hi - res.values[name], res.values[name] - lo) > 2.2 * res.stderr[name]
+    assert re.search(r"E\* = 3\.9\d* \+[\d.]+/-[\d.]+ MPa", fitting.summary_line(res))
 
 
 @pytest.mark.slow

@@ -1,6 +1,6 @@
 """A parameter the data bound from one side: LM stops at the bound, the profile of χ² gives its
-interval (fitting._optimisers' dry limit, fitting._profile), on a stand-in problem whose
-profile is known in closed form.
+interval and the other parameter's through it (fitting._optimisers' dry limit,
+fitting._profile), on a stand-in problem whose profiles are known in closed form.
 
 The stand-in is the near-dry contact's shape: the response is c + a η^p g(t) with the film's
 force a η^p g below the noise at the truth, fitted in x = (c, ln η) like the lubjax fits. In
@@ -18,13 +18,15 @@ from fitting import _optimisers, _profile
 P, AMP, N = 0.7, 3.0, 200
 T = np.linspace(0.0, 1.0, N)
 SHAPE = np.exp(-3.0 * T) - 0.3
+#: A film shape correlated with the constant (+0.79 on [0, 1]), as E* and z0 are with η near dry.
+LEANING = np.exp(-3.0 * T)
 
 
-def _problem(eta_true, seed):
-    y = 1.0 + AMP * eta_true**P * SHAPE + np.random.default_rng(seed).normal(size=N)
+def _problem(eta_true, seed, shape=SHAPE):
+    y = 1.0 + AMP * eta_true**P * shape + np.random.default_rng(seed).normal(size=N)
 
     def one(x):
-        film = AMP * np.exp(P * x[1]) * SHAPE
+        film = AMP * np.exp(P * x[1]) * shape
         J = np.column_stack([np.ones(N), P * film])
         return x[0] + film - y, J, True
 
@@ -96,3 +98,56 @@ def test_profile_interval_matches_the_closed_form(eta_true, seed):
     assert lo <= eta_true <= hi
     if eta_true == 0.1:
         assert found["1sigma"][0] > -math.inf
+
+
+def _exact_c_interval(y, level, s2):
+    """The interval of c at ``level`` standard errors from its closed-form profile: at fixed c,
+    χ² is least over u ≥ 0 at u(c) = max(0, (a g)·(y - c)/|a g|²)."""
+    film = AMP * LEANING
+
+    def chi2(c):
+        u = np.maximum(0.0, (y[None] - c[:, None]) @ film / (film @ film))
+        r = c[:, None] + u[:, None] * film - y[None]
+        return np.sum(r * r, axis=1)
+
+    c = np.mean(y) + np.linspace(-1.0, 1.0, 40001)
+    height = np.sqrt(np.maximum(chi2(c) - chi2(c).min(), 0.0) / s2)
+    inside = c[height <= level]
+    assert inside[0] > c[0] and inside[-1] < c[-1]  # the grid holds the interval
+    return inside[0], inside[-1]
+
+
+@pytest.mark.parametrize("eta_true, seed", [(0.0, 0), (0.0, 1), (0.0, 3), (0.01, 2),
+                                            (0.05, 4), (0.05, 5), (0.1, 6), (0.1, 7)])
+def test_companion_interval_matches_the_closed_form(eta_true, seed):
+    """The other parameter's interval through η's profile (fitting._profile.companion_intervals)
+    against c's own closed-form profile (min over u = η^p ≥ 0), with a film shape that leans
+    on c as E* and z0 do on η near dry: both ends at 1σ and 2σ within 0.1 of c's conditional
+    error (c is linear in u, not in ln η, between the walk's points; the draws give ≤ 0.05),
+    where the symmetric errors miss by more: the conditional one (η held) misses an end at 2σ
+    by 0.2 to 1.2 of it, the marginal one (η free, linearised) by 0.3 to 1.1 wherever η's
+    interval reaches 0."""
+    evaluate, y = _problem(eta_true, seed, LEANING)
+    out = _fit(evaluate, [[1]])
+    r = out.r
+    s2 = float(r @ r) / (N - 2)
+    cov = s2 * np.linalg.inv(out.J.T @ out.J)
+    found = _profile.profile_interval(lambda x: evaluate([x])[0][0], out.x, r, out.J, 1, s2)
+    companion = _profile.companion_intervals(found["path"], 1, s2, 1.0, cov)
+    conditional = math.sqrt(cov[0, 0] - cov[0, 1] ** 2 / cov[1, 1])
+    assert conditional == pytest.approx(math.sqrt(s2 / N), rel=1e-9)
+    c_hat = out.x[0]
+    for key, level in _profile.LEVELS.items():
+        lo, hi = companion[0][key]
+        lo_exact, hi_exact = _exact_c_interval(y, level, s2)
+        assert abs(lo - lo_exact) < 0.1 * conditional, (key, lo, lo_exact)
+        assert abs(hi - hi_exact) < 0.1 * conditional, (key, hi, hi_exact)
+
+        def misses(sigma, lo_exact=lo_exact, hi_exact=hi_exact, level=level):
+            return max(abs(c_hat - level * sigma - lo_exact),
+                       abs(c_hat + level * sigma - hi_exact)) / conditional
+
+        if key == "2sigma":
+            assert misses(conditional) > 0.15
+            if found[key][0] == -math.inf:
+                assert misses(math.sqrt(cov[0, 0])) > 0.15
