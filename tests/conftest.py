@@ -1,8 +1,6 @@
 import os
-import shutil
 import subprocess
 import sys
-import tempfile
 
 import jax
 import pytest
@@ -12,15 +10,6 @@ jax.config.update("jax_enable_x64", True)
 # that call them in-process must not write there nor change JAX's configuration for the tests
 # after them. The cache's own tests (test_fitting_cache.py) run their CLIs without this.
 os.environ["LUBJAX_CACHE"] = "0"
-# Their own persistent cache, one folder for the session (pytest_configure makes it; the xdist
-# workers inherit its name): programs compiled for one test (the paper traces' fit model, the
-# default relax) are loaded, not compiled again, by the next test or worker that builds the
-# same program. Set through jax.config, not JAX_COMPILATION_CACHE_DIR, so that child
-# processes (the cache's own tests, the command lines) see JAX's default; fitting's exported
-# programs stay off (fitting/_cache.py is not enabled).
-_SESSION_CACHE = "LUBJAX_TEST_XLA_CACHE"
-if os.environ.get(_SESSION_CACHE):
-    jax.config.update("jax_compilation_cache_dir", os.environ[_SESSION_CACHE])
 
 
 def pytest_addoption(parser):
@@ -33,19 +22,6 @@ def pytest_addoption(parser):
 
 
 def pytest_configure(config):
-    if not os.environ.get(_SESSION_CACHE):
-        os.environ[_SESSION_CACHE] = tempfile.mkdtemp(prefix="lubjax-tests-xla-")
-        jax.config.update("jax_compilation_cache_dir", os.environ[_SESSION_CACHE])
-    _xla_flags()
-
-
-def pytest_unconfigure(config):
-    """The session's compilation cache goes with the session (the xdist controller made it)."""
-    if not hasattr(config, "workerinput"):
-        shutil.rmtree(os.environ.pop(_SESSION_CACHE, ""), ignore_errors=True)
-
-
-def _xla_flags():
     """The programs the tests jit themselves (jax.jit of a jacfwd, of a loss) compile with the
     XLA option lubjax's own programs take on the CPU (lubjax/_compiler.py: the classic emitters,
     about twice as fast to compile, code as fast). Set in XLA_FLAGS before any backend starts
