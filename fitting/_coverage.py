@@ -13,6 +13,7 @@ import numpy as np
 from ._fit import fit_traces
 from ._model import FIT_SETTINGS
 from ._profile import LEVELS
+from ._report import sided_z
 from ._scales import drive_of
 
 
@@ -69,9 +70,10 @@ def coverage(draws, truth, settings=FIT_SETTINGS, **fit_kwargs):
         ``within_1sigma`` and ``within_2sigma``, the fractions of draws with |z| ≤ 1 and ≤ 2
         (honest errors: 68 % and 95 %) or, where the fit gave the parameter a profile
         interval, with the truth inside it (``profiled``: how many; ``rms_z`` leaves out the
-        one-sided intervals and takes z of a two-sided one over its 1σ half on the truth's
-        side), ``rms_z_white`` of their white-noise part alone, ``mean_bias_over_se``,
-        ``scatter_over_se`` and ``solver_over_se``, each over the mean reported error),
+        one-sided intervals of a parameter the fit calls undetermined and takes z of another
+        one over its 1σ half on the truth's side, as the report does), ``rms_z_white`` of
+        their white-noise part alone, ``mean_bias_over_se``, ``scatter_over_se`` and
+        ``solver_over_se``, each over the mean reported error),
         ``converged`` (how many), ``n``, ``noise_models`` (those chosen), ``lag1`` (the mean
         lag-1 autocorrelation of the residuals) and ``noise_correlation`` (the mean of the
         noise's ρ the AR(1) errors took, corrected for what the fit absorbs; 0 for white).
@@ -84,20 +86,18 @@ def coverage(draws, truth, settings=FIT_SETTINGS, **fit_kwargs):
         white = np.array([r.stats["error_parts"]["white"][name] for r in results])
         solver = np.array([r.stats["error_parts"].get("solver", {}).get(name, 0.0)
                            for r in results])
-        z = (est - true) / se
+        # the report's z: over the 1σ interval's half on the truth's side where the parameter
+        # has an interval through an undetermined one's profile
+        z = np.array([sided_z(r, name, true) for r in results])
         within = {key: np.abs(z) <= level for key, level in LEVELS.items()}
         # where the data bound the parameter from one side, its interval is the profile's
         profiled = np.array([name in r.stats.get("intervals", {}) for r in results])
-        one_sided = np.zeros(len(results), dtype=bool)
+        one_sided = profiled & np.array([name in r.stats.get("undetermined", ())
+                                         for r in results])
         for i in np.flatnonzero(profiled):
             interval = results[i].stats["intervals"][name]
             for key in LEVELS:
                 within[key][i] = interval[key][0] <= true <= interval[key][1]
-            # a two-sided interval (through η's profile): z over its 1σ half on the truth's side
-            lo, hi = interval["1sigma"]
-            one_sided[i] = lo == 0
-            if lo > 0:
-                z[i] = (est[i] - true) / (est[i] - lo if true < est[i] else hi - est[i])
         table[name] = dict(
             rms_z=float(np.sqrt(np.mean(z[~one_sided] ** 2))) if (~one_sided).any() else np.nan,
             within_1sigma=float(np.mean(within["1sigma"])),

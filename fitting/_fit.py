@@ -401,16 +401,12 @@ def _trace_result(trace, spec, scales, start, layout, t, outcome, summary, j, me
         others = [n for i, n in enumerate(spec.names)
                   if active[i] and n not in held and n != "offset"]
         free = ", ".join(f"{n} ± {free_stderr[n]:.3g}" for n in others)
-        if all(n in profiled for n in others):
-            flags.append(
-                f"the errors of {', '.join(others)} hold {', '.join(held)} fixed; their "
-                f"intervals follow its profile (the report's profile of chi2), asymmetric: "
-                f"{held[0]} cannot fall below 0 (with it free, symmetric errors: {free})")
-        else:
-            flags.append(
-                f"the errors of {', '.join(others)} hold {', '.join(held)} fixed (with it free: "
-                f"{free}): {held[0]} cannot fall below 0, so its spread is one-sided and theirs "
-                "follows it only in part")
+        spread = ("their intervals follow its profile (the report's profile of chi2)"
+                  if all(n in profiled for n in others) else "theirs follows it only in part")
+        flags.append(
+            f"the errors of {', '.join(others)} hold {', '.join(held)} fixed (with it free, "
+            f"symmetric errors: {free}): {held[0]} cannot fall below 0, so its spread is "
+            f"one-sided; {spread}")
     flags += summary["flags"]
     if held:
         stats["undetermined"] = list(held)

@@ -151,7 +151,7 @@ def result_to_dict(res: FitResult) -> dict:
         out["vs_true"] = {
             units(res, n)[0]: {
                 "true": v, "relative_error": res.values[n] / v - 1,
-                "z_score": _sided_z(res, n, v) if res.stderr[n] > 0 else None,
+                "z_score": sided_z(res, n, v) if res.stderr[n] > 0 else None,
             }
             for n, v in true.items()
         }
@@ -170,7 +170,7 @@ def _value_line(res, n):
             f"(init = {start:.5g}){tag}")
     t = truth(res).get(n)
     if t is not None and res.stderr[n] > 0:
-        line += f"  [true {t / scale:.5g}, z = {_sided_z(res, n, t):+.2f}]"
+        line += f"  [true {t / scale:.5g}, z = {sided_z(res, n, t):+.2f}]"
     interval = res.stats.get("intervals", {}).get(n)
     if interval is not None:
         line += "\n" + " " * 23 + "profile of chi2: " + ", ".join(
@@ -196,17 +196,18 @@ def _shown(x, digits=2) -> str:
     return f"{x:#.{digits}g}".rstrip(".")
 
 
-def _sided_z(res, n, true):
+def sided_z(res, n, true):
     """(value - truth) over the reported error, or over the 1σ interval's half on the truth's
     side where the parameter has an interval through an undetermined one's profile (near dry:
-    E* and z0 through η's)."""
+    E* and z0 through η's). An undetermined parameter's own interval is one-sided: its z is
+    over the reported error (:func:`fitting.coverage` leaves it out of the rms)."""
     v = res.values[n]
     interval = res.stats.get("intervals", {}).get(n)
     if interval is not None and n not in res.stats.get("undetermined", ()):
         lo, hi = interval["1sigma"]
         half = v - lo if true < v else hi - v
         return (v - true) / half if half > 0 else math.nan
-    return (v - true) / res.stderr[n]
+    return (v - true) / res.stderr[n] if res.stderr[n] > 0 else math.nan
 
 
 def fit_report(res: FitResult, min_correl: float = 0.1) -> str:

@@ -213,3 +213,39 @@ def test_errors_held_at_an_undetermined_parameter_are_the_conditional_ones():
     np.testing.assert_allclose(held[np.ix_(o, o)], schur, rtol=1e-12)
     assert held[1, 1] == cov[1, 1]
     assert held_map(names, active, cov, []) is None
+
+
+def test_coverage_reads_intervals_as_the_report_does(monkeypatch):
+    """``coverage`` takes z as the report does (fitting._report.sided_z): a parameter with an
+    interval through an undetermined one's profile gets z over the 1σ interval's half on the
+    truth's side and counts in the rms; the undetermined parameter's own one-sided interval
+    counts for "within" but not for the rms, even where its 1σ end is above 0."""
+    from types import SimpleNamespace
+
+    from fitting import _coverage
+
+    def result(e_star, eta, interval_e, interval_eta):
+        return SimpleNamespace(
+            values=dict(E_star=e_star, viscosity=eta), stderr=dict(E_star=1.0, viscosity=2.0),
+            converged=True,
+            stats=dict(error_parts={"white": dict(E_star=1.0, viscosity=2.0)},
+                       intervals=dict(E_star=interval_e, viscosity=interval_eta),
+                       undetermined=["viscosity"], noise_model="white",
+                       autocorrelation_lag1=0.0, noise_correlation=0.0))
+
+    results = [
+        # truth 10 below the estimate 12: z = 2/(12 - 11) = 2, inside the 2σ interval
+        result(12.0, 0.5, {"1sigma": (11.0, 15.0), "2sigma": (9.0, 20.0)},
+               {"1sigma": (0.1, 1.0), "2sigma": (0.0, 3.0)}),
+        # truth 10 above the estimate 8: z = -2/(10 - 8) = -1, inside both
+        result(8.0, 0.2, {"1sigma": (6.0, 10.0), "2sigma": (5.0, 13.0)},
+               {"1sigma": (0.0, 0.6), "2sigma": (0.0, 1.5)}),
+    ]
+    monkeypatch.setattr(_coverage, "fit_traces", lambda draws, **kwargs: results)
+    out = coverage([None, None], dict(E_star=10.0, viscosity=0.8))
+    e_star, eta = out["table"]["E_star"], out["table"]["viscosity"]
+    assert e_star["rms_z"] == pytest.approx(np.sqrt((2.0**2 + 1.0**2) / 2))
+    assert (e_star["within_1sigma"], e_star["within_2sigma"]) == (0.5, 1.0)
+    assert np.isnan(eta["rms_z"])  # both one-sided (undetermined): no two-sided z
+    assert (eta["within_1sigma"], eta["within_2sigma"]) == (0.5, 1.0)
+    assert e_star["profiled"] == eta["profiled"] == 2
