@@ -4,6 +4,8 @@ converged runs, over the stability map, every drive and substrate; and what they
     python -m benchmarks.derivative_map [--quick]     # the map
     python -m benchmarks.derivative_map --cost        # grad and jacfwd against the primal
     python -m benchmarks.derivative_map --min-beta 1e7  # the near-dry cells alone
+    python -m benchmarks.derivative_map --min-beta 1e7 --group viscoelastic --dr 0.007
+                                                      # one scene, on a finer mesh
 
 Each cell is a run on the mesh :func:`lubjax.relax` gives it (``lubjax.mesh_for``, default
 settings) with its response read at ``TIMES_PER_CELL`` times in [t_end/12, t_end]: F̄ for a
@@ -36,7 +38,11 @@ Cells (``--quick``: the first four β of each group and z̄0 ∈ {0.5}):
 of relax's run (β = 100, z̄0 = 0.5, t̄ ≤ 5, default settings, no error estimate) at
 ``max_steps`` 500, 2000, 20 000 and 80 000, and the ratios to the primal (each the best of 3).
 
-Writes benchmarks/out/derivative_map{,_quick}.{csv,md} (after every cell) or
+``--dr``: the cells' meshes with this fine-zone spacing Δr̄ (``Settings.dr``; default the
+tolerance's, 0.014), to tell what the mesh does to a derivative from what the steps do.
+
+Writes benchmarks/out/derivative_map{,_quick}.{csv,md} (after every cell; with ``--group``,
+``--min-beta`` or ``--dr`` in the name) or
 benchmarks/out/derivative_cost.md.
 """
 
@@ -96,10 +102,11 @@ def _response(disc, drive, substrate, t_end, tol, times, channel):
     return f
 
 
-def check_cell(drive, substrate, beta, z0, t_end, channel, ref_rtol=REF_RTOL):
+def check_cell(drive, substrate, beta, z0, t_end, channel, ref_rtol=REF_RTOL, dr=None):
     """AD (jacfwd, jacrev) of the response against central differences of runs at ``ref_rtol``
-    on the same mesh; returns a dict of the errors per parameter and the cell's facts."""
-    settings = lubjax.Settings(error_estimate=False)
+    on the same mesh (``dr``: its fine zone's spacing, default the tolerance's); returns a dict
+    of the errors per parameter and the cell's facts."""
+    settings = lubjax.Settings(error_estimate=False, dr=dr)
     mesh = lubjax.mesh_for(settings, drive=drive, beta=beta, z0=z0, t_end=t_end)
     disc = discretise(mesh, substrate)
     times = jnp.linspace(t_end / TIMES_PER_CELL, t_end, TIMES_PER_CELL)
@@ -111,7 +118,7 @@ def check_cell(drive, substrate, beta, z0, t_end, channel, ref_rtol=REF_RTOL):
     jac_fwd = np.asarray(jax.jit(jax.jacfwd(values))(p))
     jac_rev = np.asarray(jax.jit(jax.jacrev(values))(p))
     ad_s = time.perf_counter() - start
-    reference = lubjax.Settings(rtol=ref_rtol, max_steps=200_000).tolerance()
+    reference = lubjax.Settings(rtol=ref_rtol, max_steps=200_000, dr=dr).tolerance()
     g = _response(disc, drive, substrate, t_end, reference, times, channel)
     steps = np.array([STEP, STEP * max(z0, 0.1)])
     points = [p] + [p + s * k * steps[j] * jnp.eye(2)[j] for k in (1, 2) for j in range(2)
@@ -185,13 +192,18 @@ def derivative_map(args, argv):
     path = os.path.splitext(args.out)[0] + ("_quick" if args.quick else "")
     if args.min_beta is not None:
         path += f"_beta_from_{args.min_beta:g}"
+    if args.group is not None:
+        path += "_" + args.group.replace(" ", "_")
+    if args.dr is not None:
+        path += f"_dr_{args.dr:g}"
     rows = []
-    cells = [c for c in _scenes(args.quick) if args.min_beta is None or c[3] >= args.min_beta]
+    cells = [c for c in _scenes(args.quick) if (args.min_beta is None or c[3] >= args.min_beta)
+             and (args.group is None or c[0] == args.group)]
     for k, (group, drive, substrate, beta, z0, t_end, channel) in enumerate(cells, 1):
         print(f"[{k}/{len(cells)}] {group}, β = {beta:g}, z̄0 = {z0:g}, t̄ ≤ {t_end:g}",
               flush=True)
         try:
-            cell = check_cell(drive, substrate, beta, z0, t_end, channel)
+            cell = check_cell(drive, substrate, beta, z0, t_end, channel, dr=args.dr)
         except (lubjax.SolverError, ValueError) as exc:
             print(f"  refused: {exc}", flush=True)
             continue
@@ -257,6 +269,12 @@ def main(argv=None):
     ap.add_argument("--cost", action="store_true", help="grad and jacfwd against the primal")
     ap.add_argument("--min-beta", type=float, default=None,
                     help="only the cells with beta at least this (writes ..._beta_from_B)")
+    ap.add_argument("--group", default=None,
+                    choices=("travel", "layer", "viscoelastic", "load", "spring", "free sphere",
+                             "long hold"),
+                    help="only this scene's cells")
+    ap.add_argument("--dr", type=float, default=None,
+                    help="the meshes' fine-zone spacing (default: the tolerance's, 0.014)")
     args = _harness.parse(ap, argv)
     if args.cost:
         cost(args, argv)
