@@ -6,6 +6,8 @@ converged runs, over the stability map, every drive and substrate; and what they
     python -m benchmarks.derivative_map --min-beta 1e7  # the near-dry cells alone
     python -m benchmarks.derivative_map --min-beta 1e7 --group viscoelastic --dr 0.007
                                                       # one scene, on a finer mesh
+    python -m benchmarks.derivative_map --min-beta 1e9 --rtol 3e-5
+                                                      # AD at a tighter tolerance
 
 Each cell is a run on the mesh :func:`lubjax.relax` gives it (``lubjax.mesh_for``, default
 settings) with its response read at ``TIMES_PER_CELL`` times in [t_end/12, t_end]: F̄ for a
@@ -39,16 +41,18 @@ of relax's run (β = 100, z̄0 = 0.5, t̄ ≤ 5, default settings, no error esti
 ``max_steps`` 500, 2000, 20 000 and 80 000, and the ratios to the primal (each the best of 3).
 
 ``--dr``: the cells' meshes with this fine-zone spacing Δr̄ (``Settings.dr``; default the
-tolerance's, 0.014), to tell what the mesh does to a derivative from what the steps do.
+tolerance's, 0.014), to tell what the mesh does to a derivative from what the steps do;
+``--rtol``: the AD runs' step tolerance on the default's mesh, to tell what the steps do.
 
 Writes benchmarks/out/derivative_map{,_quick}.{csv,md} (after every cell; with ``--group``,
-``--min-beta`` or ``--dr`` in the name) or
+``--min-beta``, ``--dr`` or ``--rtol`` in the name) or
 benchmarks/out/derivative_cost.md.
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import os
 import time
 
@@ -65,6 +69,7 @@ TIMES_PER_CELL = 12
 STEP = 2e-3
 CATEGORIES = ("ok", "reference noise", "below resolution", "inaccurate", "failed")
 PARAMETERS = ("ln β", "z̄0")
+GROUPS = ("travel", "layer", "viscoelastic", "load", "spring", "free sphere", "long hold")
 
 
 def _scenes(quick: bool):
@@ -75,22 +80,22 @@ def _scenes(quick: bool):
     z0s = (0.05, 0.5, 2.0, 5.0)
     for beta in betas[:4] if quick else betas:
         for z0 in (0.5,) if quick else z0s:
-            cells.append(("travel", lubjax.Travel(), halfspace, beta, z0, 10.0, "force"))
+            cells.append((GROUPS[0], lubjax.Travel(), halfspace, beta, z0, 10.0, "force"))
+    # the scenes of GROUPS[1:-1], in that order
     others = [
-        ("layer", lambda b: lubjax.Travel(), lubjax.Layer(2.0), 0.5, "force"),
-        ("viscoelastic", lambda b: lubjax.Travel(),
-         lubjax.Viscoelastic.standard_linear_solid(3.0, 0.5), 0.5, "force"),
-        ("load", lambda b: lubjax.Load(), halfspace, 0.5, "gap"),
-        ("spring", lambda b: lubjax.Spring(2.0), halfspace, 0.5, "force"),
-        ("free sphere", lambda b: lubjax.FreeSphere(inverse_mass=0.5 * b, weight=0.1),
-         halfspace, 1.0, "gap"),
+        (lambda b: lubjax.Travel(), lubjax.Layer(2.0), 0.5, "force"),
+        (lambda b: lubjax.Travel(), lubjax.Viscoelastic.standard_linear_solid(3.0, 0.5), 0.5,
+         "force"),
+        (lambda b: lubjax.Load(), halfspace, 0.5, "gap"),
+        (lambda b: lubjax.Spring(2.0), halfspace, 0.5, "force"),
+        (lambda b: lubjax.FreeSphere(inverse_mass=0.5 * b, weight=0.1), halfspace, 1.0, "gap"),
     ]
-    for group, drive, substrate, z0, channel in others:
+    for group, (drive, substrate, z0, channel) in zip(GROUPS[1:-1], others, strict=True):
         for beta in (10.0,) if quick else (10.0, 1e4, 1e7):
             cells.append((group, drive(beta), substrate, beta, z0, 5.0, channel))
     if not quick:
         for beta in (1e2, 1e4):
-            cells.append(("long hold", lubjax.Travel(), halfspace, beta, 0.5, 1e3, "force"))
+            cells.append((GROUPS[-1], lubjax.Travel(), halfspace, beta, 0.5, 1e3, "force"))
     return cells
 
 
@@ -102,13 +107,17 @@ def _response(disc, drive, substrate, t_end, tol, times, channel):
     return f
 
 
-def check_cell(drive, substrate, beta, z0, t_end, channel, ref_rtol=REF_RTOL, dr=None):
-    """AD (jacfwd, jacrev) of the response against central differences of runs at ``ref_rtol``
-    on the same mesh (``dr``: its fine zone's spacing, default the tolerance's); returns a dict
-    of the errors per parameter and the cell's facts."""
+def check_cell(drive, substrate, beta, z0, t_end, channel, ref_rtol=REF_RTOL, dr=None,
+               rtol=None):
+    """AD (jacfwd, jacrev) of the response of a run at ``rtol`` (default the default
+    tolerance's) against central differences of runs at ``ref_rtol`` on the same mesh (``dr``:
+    its fine zone's spacing, default the default tolerance's); returns a dict of the errors per
+    parameter and the cell's facts."""
     settings = lubjax.Settings(error_estimate=False, dr=dr)
     mesh = lubjax.mesh_for(settings, drive=drive, beta=beta, z0=z0, t_end=t_end)
     disc = discretise(mesh, substrate)
+    if rtol is not None:  # the steps' tolerance only: the mesh stays the default's
+        settings = dataclasses.replace(settings, rtol=rtol)
     times = jnp.linspace(t_end / TIMES_PER_CELL, t_end, TIMES_PER_CELL)
     f = _response(disc, drive, substrate, t_end, settings.tolerance(), times, channel)
     p = jnp.array([np.log(beta), z0])
@@ -196,6 +205,8 @@ def derivative_map(args, argv):
         path += "_" + args.group.replace(" ", "_")
     if args.dr is not None:
         path += f"_dr_{args.dr:g}"
+    if args.rtol is not None:
+        path += f"_rtol_{args.rtol:g}"
     rows = []
     cells = [c for c in _scenes(args.quick) if (args.min_beta is None or c[3] >= args.min_beta)
              and (args.group is None or c[0] == args.group)]
@@ -203,7 +214,8 @@ def derivative_map(args, argv):
         print(f"[{k}/{len(cells)}] {group}, β = {beta:g}, z̄0 = {z0:g}, t̄ ≤ {t_end:g}",
               flush=True)
         try:
-            cell = check_cell(drive, substrate, beta, z0, t_end, channel, dr=args.dr)
+            cell = check_cell(drive, substrate, beta, z0, t_end, channel, dr=args.dr,
+                              rtol=args.rtol)
         except (lubjax.SolverError, ValueError) as exc:
             print(f"  refused: {exc}", flush=True)
             continue
@@ -269,12 +281,12 @@ def main(argv=None):
     ap.add_argument("--cost", action="store_true", help="grad and jacfwd against the primal")
     ap.add_argument("--min-beta", type=float, default=None,
                     help="only the cells with beta at least this (writes ..._beta_from_B)")
-    ap.add_argument("--group", default=None,
-                    choices=("travel", "layer", "viscoelastic", "load", "spring", "free sphere",
-                             "long hold"),
-                    help="only this scene's cells")
+    ap.add_argument("--group", default=None, choices=GROUPS, help="only this scene's cells")
     ap.add_argument("--dr", type=float, default=None,
                     help="the meshes' fine-zone spacing (default: the tolerance's, 0.014)")
+    ap.add_argument("--rtol", type=float, default=None,
+                    help="the AD runs' step tolerance, on the default tolerance's mesh "
+                         "(default: the default, 1e-4)")
     args = _harness.parse(ap, argv)
     if args.cost:
         cost(args, argv)

@@ -339,7 +339,8 @@ def _collision_refinement(settings, drive, z0, beta, rim) -> float:
 #: Near dry the contact's spacing is at most max(Δr̄/contact_refinement, DRY_CONTACT_SLOPE Δr̄ r̄)
 #: and its edge is refined DRY_RIM_REFINEMENT times (at most ``Settings.rim_refinement``): ×3
 #: holds the force, the derivatives need ×6 (a force's derivative in the indentation is its
-#: contact's radius, which a sharp edge between nodes misplaces by a fraction of a cell).
+#: contact's radius, which a sharp edge between nodes misplaces by a fraction of a cell;
+#: ``python -m benchmarks.studies.near_dry_edge`` measures it).
 DRY_CONTACT_SLOPE = 2.0
 DRY_RIM_REFINEMENT = 6.0
 
