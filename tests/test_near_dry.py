@@ -278,12 +278,11 @@ def test_relax_derivatives_near_dry_match_converged_central_differences():
     """β = 10⁷, z̄0 = 0.1, default settings (the force norm, its mesh): dF̄/dz̄0 by jax.jacfwd
     and by jax.jacrev of relax itself agree with central differences of runs at rtol 1e-6 on
     the same mesh to 1.5e-3 of its largest value (seen: 6e-4, the reference's own two steps
-    agreeing to 4e-4). With the near-dry mesh's edge refined 3× instead of 6× it was 4e-4 to
+    agreeing to 4e-4). With the near-dry mesh's edge refined 3× instead of 6× it is 4e-4 to
     1.5e-3 off, depending on the rounding that moves the steps near dry (docs/accuracy.md,
-    "Near dry, the contact's edge"). Before the tangent was that of the implicit step it grew
-    without bound here (|J| ~ 1e6 where F̄ ~ 1), and with the film left free by the force norm
-    it was 1e-2 off (FILM_CAP). dF̄/d ln β (~5e-5, under F̄'s own tolerance for a unit change)
-    is below what the reference resolves."""
+    "Near dry, the contact's edge"). The tangent of the two stages themselves (not the fully
+    implicit step's) grows without bound here (|J| ~ 1e6 where F̄ ~ 1). dF̄/d ln β (~5e-5,
+    under F̄'s own tolerance for a unit change) is below what the reference resolves."""
     times = np.linspace(0.5, 5.0, 10)
     forward, reverse, central = _relax_derivatives(1e7, 0.1, times)
     cd, cd2 = central[2e-3], central[4e-3]
@@ -306,8 +305,8 @@ def test_relax_derivatives_at_beta_1e9_hold_hertz():
     3.6e-3 off at z̄0 = 0.05 and 0.1 on one machine; with the 3× edge 3e-4 to 6.4e-3 alone,
     depending on the compiled program's rounding, and 1.9e-2 inside the suite after other work
     in the same process (docs/accuracy.md#derivatives); asked: 3e-2, what the docs claim for
-    the default near dry. It grew without bound (NaN at
-    z̄0 = 0.05) while the midpoint film took a straight chord of the elastic part."""
+    the default near dry. With a midpoint film that takes a straight chord of the elastic part
+    (missing its curvature by Δr̄²/8 ≫ h̄) it grows without bound (NaN at z̄0 = 0.05)."""
     import jax
     import jax.numpy as jnp
 
