@@ -318,3 +318,25 @@ def test_relax_derivatives_at_beta_1e9_hold_hertz():
                 1e9, z, 2.0, settings=s).at(hold))(jnp.asarray(z0)))
             hertz = -np.pi * np.sqrt(1.0 - z0)
             np.testing.assert_allclose(slope, hertz, rtol=bound, err_msg=f"rtol {rtol}")
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="at beta = 1e9 the default tolerance's tangent grows "
+                   "without bound in a long hold (NaN from t = 4.5 at z0 = 0.1) while the run "
+                   "is right: an open defect (docs/accuracy.md#derivatives)")
+def test_relax_derivative_at_beta_1e9_stays_bounded_in_a_long_hold():
+    """β = 10⁹, z̄0 = 0.1, t̄ ≤ 10, default settings: in the hold dF̄/dz̄0 should be Hertz's,
+    -π √(1 - z̄0), to a few 10⁻³ (test_relax_derivatives_at_beta_1e9_hold_hertz to t̄ = 2).
+    jacfwd drifts from 0.6 % off at t̄ = 1.5 to 4 % at t̄ = 4 and is NaN from t̄ ≈ 4.5; the
+    force itself stays Hertz's. Held tighter, the film keeps the tangent bounded: at rtol 3e-5
+    (1.5× the steps) it is within 8e-4 of Hertz's to t̄ = 10, and with the film's error capped
+    at 100 rtol of itself instead of ``FILM_CAP`` = 10³ (lubjax/_controller.py) within 2e-3.
+    β = 10⁸ and 3·10⁸ are within 2.2e-3 at the default."""
+    import jax
+    import jax.numpy as jnp
+
+    hold = np.linspace(1.5, 10.0, 15)
+    settings = lubjax.Settings(error_estimate=False)
+    slope = np.asarray(jax.jacfwd(lambda z: lubjax.relax(1e9, z, 10.0, settings=settings).at(
+        hold))(jnp.asarray(0.1)))
+    np.testing.assert_allclose(slope, -np.pi * np.sqrt(0.9), rtol=3e-2)
