@@ -30,7 +30,8 @@ to > 1e-3 and the error is within 3× of that: the reference cannot tell), below
 AD is within 1e-3 of that range: a derivative under the solver's own error), inaccurate.
 
 Cells (``--quick``: the first four β of each group and z̄0 ∈ {0.5}):
-  travel on the half-space, β ∈ {0.1, 10, 10³, 10⁵, 10⁷, 10⁹} × z̄0 ∈ {0.05, 0.5, 2, 5}, t̄ ≤ 10;
+  travel on the half-space, β ∈ {0.1, 10, 10³, 10⁵, 10⁷, 10⁹} × z̄0 ∈ {0.05, 0.1, 0.5, 2, 5},
+  t̄ ≤ 10;
   travel on a bonded layer (thickness 2 √(R d_c)) and on a viscoelastic solid (E₀/E∞ = 3,
   τ = 0.5), load, spring (K̄ = 2) and free sphere (1/m̄ = 50 β/100, weight 0.1, from z̄0 = 1),
   β ∈ {10, 10⁴, 10⁷}, z̄0 = 0.5, t̄ ≤ 5;
@@ -45,7 +46,7 @@ tolerance's, 0.014), to tell what the mesh does to a derivative from what the st
 ``--rtol``: the AD runs' step tolerance on the default's mesh, to tell what the steps do.
 
 Writes benchmarks/out/derivative_map{,_quick}.{csv,md} (after every cell; with ``--group``,
-``--min-beta``, ``--dr`` or ``--rtol`` in the name) or
+``--min-beta``, ``--z0``, ``--dr`` or ``--rtol`` in the name) or
 benchmarks/out/derivative_cost.md.
 """
 
@@ -77,7 +78,7 @@ def _scenes(quick: bool):
     halfspace = lubjax.HalfSpace()
     cells = []
     betas = (0.1, 10.0, 1e3, 1e5, 1e7, 1e9)
-    z0s = (0.05, 0.5, 2.0, 5.0)
+    z0s = (0.05, 0.1, 0.5, 2.0, 5.0)
     for beta in betas[:4] if quick else betas:
         for z0 in (0.5,) if quick else z0s:
             cells.append((GROUPS[0], lubjax.Travel(), halfspace, beta, z0, 10.0, "force"))
@@ -203,13 +204,16 @@ def derivative_map(args, argv):
         path += f"_beta_from_{args.min_beta:g}"
     if args.group is not None:
         path += "_" + args.group.replace(" ", "_")
+    if args.z0 is not None:
+        path += f"_z0_{args.z0:g}"
     if args.dr is not None:
         path += f"_dr_{args.dr:g}"
     if args.rtol is not None:
         path += f"_rtol_{args.rtol:g}"
     rows = []
     cells = [c for c in _scenes(args.quick) if (args.min_beta is None or c[3] >= args.min_beta)
-             and (args.group is None or c[0] == args.group)]
+             and (args.group is None or c[0] == args.group)
+             and (args.z0 is None or c[4] == args.z0)]
     for k, (group, drive, substrate, beta, z0, t_end, channel) in enumerate(cells, 1):
         print(f"[{k}/{len(cells)}] {group}, β = {beta:g}, z̄0 = {z0:g}, t̄ ≤ {t_end:g}",
               flush=True)
@@ -282,6 +286,7 @@ def main(argv=None):
     ap.add_argument("--min-beta", type=float, default=None,
                     help="only the cells with beta at least this (writes ..._beta_from_B)")
     ap.add_argument("--group", default=None, choices=GROUPS, help="only this scene's cells")
+    ap.add_argument("--z0", type=float, default=None, help="only the cells at this z̄0")
     ap.add_argument("--dr", type=float, default=None,
                     help="the meshes' fine-zone spacing (default: the tolerance's, 0.014)")
     ap.add_argument("--rtol", type=float, default=None,
