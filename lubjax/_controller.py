@@ -60,6 +60,15 @@ BACKWARD_EULER_FORCE = 10.0 * FORCE_ATOL
 TAIL_TIGHTENING = 3.0
 
 
+#: Under the force norm a thin film's local error is still at most this many times rtol of
+#: itself (a tenth of the film at the default rtol): ``Tolerance.film_cap``'s default. The
+#: film's error hardly moves the force, but its derivatives do (a film drained to 10⁻⁷ moves by
+#: ~10⁻³ per unit z̄0 at a node the contact's edge has passed): docs/accuracy.md#derivatives.
+FILM_CAP = 1e3
+#: The film cap of a run whose derivatives are taken (:meth:`Tolerance.for_tangents`).
+TANGENT_FILM_CAP = 100.0
+
+
 #: How much looser the error estimates' time-coarsened runs are (:meth:`Tolerance.loosened`).
 LOOSENING = 8.0
 
@@ -88,6 +97,9 @@ class Tolerance:
             (dimensionless).
         film_error: "auto" (default), "relative" or "force", what the film's error is
             measured against (:func:`film_scale`).
+        film_cap: under the "force" film norm a film's local error is still at most
+            film_cap × rtol of itself (default ``FILM_CAP``; a run whose derivatives are taken
+            holds it to ``TANGENT_FILM_CAP``, :meth:`for_tangents`).
     """
 
     rtol: float = DEFAULT_RTOL
@@ -97,6 +109,7 @@ class Tolerance:
     max_steps: int = 20_000
     force_floor: float = 1e-8
     film_error: str = "auto"
+    film_cap: float = FILM_CAP
 
     def loosened(self) -> Tolerance:
         """The error estimate's time-coarsened partner of this tolerance.
@@ -106,8 +119,24 @@ class Tolerance:
         """
         return dataclasses.replace(self, rtol=min(LOOSENING * self.rtol, 0.1))
 
+    def for_tangents(self) -> Tolerance:
+        """The tolerance of a run whose derivatives are taken: its film cap at most
+        ``TANGENT_FILM_CAP`` (the rest as is).
 
-register(Tolerance, data=("rtol", "atol", "initial_step", "force_floor"),
+        Why: under the "force" norm the film inside a near-dry contact may err by a tenth of
+        itself, which the force does not feel; its derivatives do. At β = 10⁹, z̄0 = 0.1 the
+        tangent dF̄/dz̄0 in a hold to t̄ = 10 is off Hertz's by 4 % to NaN, depending on the
+        rounding of z̄0, with a cap of 10³, and within 3·10⁻⁴ with 100 on the finer contact mesh
+        :func:`lubjax.mesh_for` gives a differentiated run (docs/accuracy.md#derivatives).
+        Neither alone suffices; under the "relative" norm (β < 10⁵ with "auto") nothing changes.
+
+        Returns:
+            Tolerance: ``film_cap`` = min(film_cap, ``TANGENT_FILM_CAP``).
+        """
+        return dataclasses.replace(self, film_cap=jnp.minimum(self.film_cap, TANGENT_FILM_CAP))
+
+
+register(Tolerance, data=("rtol", "atol", "initial_step", "force_floor", "film_cap"),
          static=("order", "max_steps", "film_error"))
 #: The tolerance's defaults: :class:`lubjax.Settings` takes its own from here.
 DEFAULT_TOLERANCE = Tolerance()
@@ -254,7 +283,7 @@ class Controller(NamedTuple):
         level = candidate.level
         previous = history.newest()
         gap_start = self.gap_start(level.gap.dtype)
-        film = film_scale(level, previous, self.tol.film_error, self.beta)
+        film = film_scale(level, previous, self.tol.film_error, self.beta, self.tol.film_cap)
         ratio = error_ratio(candidate.estimate, level, previous, state.peaks, self.tol,
                             self.drive, gap_start, film)
         valid = admissible(level, state.peaks, self.drive)
@@ -345,26 +374,20 @@ def film_collapses(history, dt, order, max_order: int):
     return (order > 1) & collapse
 
 
-#: Under the force norm a thin film's local error is still at most this many times rtol of
-#: itself (a tenth of the film at the default rtol). The film's error hardly moves the force, but
-#: its derivatives do (a film drained to 10⁻⁷ moves by ~10⁻³ per unit z̄0 at a node the
-#: contact's edge has passed): docs/accuracy.md#derivatives.
-FILM_CAP = 1e3
-
-
-def film_scale(level, previous, film_error: str, beta):
+def film_scale(level, previous, film_error: str, beta, cap=FILM_CAP):
     """What the film's local error is measured against at each node (times rtol).
 
     "relative": max(|h̄ⁿ⁺¹|, |h̄ⁿ|), the film's own size. "force" counts the film's error
     through the force it moves: an absolute film error δ inside a contact of indentation
     δ_c = max(-z̄, 0) shifts the elastic indentation by at most δ, and a Hertz force
     (F ∝ δ_c^{3/2}) by 1.5 δ/δ_c of itself. So the film may err by rtol · 2δ_c/3 where that is
-    more than rtol of the film, but not by more than ``FILM_CAP`` × rtol of itself (the film
-    itself at the default rtol): the force's own tolerance, not a nanometre film at the
-    contact's edge (near dry, β ≫ 1, h̄ ~ (βt̄)^{-1/2} ≪ δ_c, the relative control spends most
-    steps resolving the film's collapse at each node the contact edge passes), with the film
-    still resolved coarsely enough for the derivatives. Without indentation (z̄ ≥ 0, the film
-    carries the force) it is the relative control bit for bit.
+    more than rtol of the film, but not by more than ``cap`` × rtol of itself (a tenth of the
+    film at the default rtol and ``FILM_CAP``): the force's own tolerance, not a nanometre film
+    at the contact's edge (near dry, β ≫ 1, h̄ ~ (βt̄)^{-1/2} ≪ δ_c, the relative control
+    spends most steps resolving the film's collapse at each node the contact edge passes), with
+    the film still resolved coarsely; a run whose derivatives are taken holds it tighter
+    (``TANGENT_FILM_CAP``, :meth:`Tolerance.for_tangents`). Without indentation (z̄ ≥ 0, the
+    film carries the force) it is the relative control bit for bit.
 
     "auto" (the default) is "force" from β = ``NEAR_DRY_BETA`` on and "relative" below, where
     the film inside a contact is what a run reports about it; above, the relative control costs
@@ -375,7 +398,7 @@ def film_scale(level, previous, film_error: str, beta):
     relative = jnp.maximum(jnp.abs(level.film), jnp.abs(previous.film))
     if film_error == "relative":
         return relative
-    through_force = jnp.minimum((2.0 / 3.0) * jnp.maximum(-level.gap, 0.0), FILM_CAP * relative)
+    through_force = jnp.minimum((2.0 / 3.0) * jnp.maximum(-level.gap, 0.0), cap * relative)
     force = jnp.maximum(relative, through_force)
     return jnp.where(film_held_by_force(film_error, beta), force, relative)
 

@@ -343,9 +343,16 @@ def _collision_refinement(settings, drive, z0, beta, rim) -> float:
 #: ``python -m benchmarks.studies.near_dry_edge`` measures it).
 DRY_CONTACT_SLOPE = 2.0
 DRY_RIM_REFINEMENT = 6.0
+#: Near dry a run whose derivatives are taken has Δr̄ this many times finer (with the
+#: tolerance's Δr̄; a given ``Settings.dr`` is kept): in a long hold at β ≳ 10⁸ the trapped
+#: film's neck moves across the contact's nodes, and on the plain spacing each crossing puts a
+#: spike of a few per cent into dF̄/dz̄0 however fine the steps (``Tolerance.for_tangents``
+#: says what else such a run does).
+DRY_DERIVATIVE_REFINEMENT = 1.4
 
 
-def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None) -> Mesh:
+def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None,
+             derivatives: bool = False) -> Mesh:
     """The mesh :func:`lubjax.relax` runs on for ``settings`` and one run: the tolerance's
     (``settings.mesh_parameters()``), refined for the contact the run ends in.
 
@@ -357,7 +364,8 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None) -> Mesh:
     contact is refined for the collision's thinnest film. Near dry
     (:func:`film_held_by_force`) the mesh serves the force: the axis to
     Δr̄/contact_refinement, the spacing growing as ``DRY_CONTACT_SLOPE`` Δr̄ r̄, the edge by
-    ``DRY_RIM_REFINEMENT``. docs/design.md, "The mesh rule", gives the numbers.
+    ``DRY_RIM_REFINEMENT``, and with ``derivatives`` all of it ``DRY_DERIVATIVE_REFINEMENT``
+    times finer. docs/design.md, "The mesh rule", gives the numbers.
 
     :func:`lubjax.make_plan`, :func:`lubjax.sweep` and the fits share one mesh across a batch
     (``settings.mesh()``), so in long holds to thin films they can differ from ``relax``.
@@ -371,6 +379,7 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None) -> Mesh:
         t_end: its final time t̄ (units of t_c), in (0, 1e9].
         indenter: ``lubjax.Paraboloid()`` (None, the default: Hertz's contact radius) or
             ``lubjax.Sphere(d_c/R)`` (Sneddon's, smaller at the same depth).
+        derivatives: whether the run's derivatives are taken (:func:`lubjax.relax` knows).
 
     Returns:
         Mesh: the mesh.
@@ -399,8 +408,12 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None) -> Mesh:
             return settings_mesh(settings, rim, collision, collision)
         return settings_mesh(settings, None, _interior_refinement(settings, beta, t_end),
                              _rim_refinement(settings, beta, t_end))
+    near_dry = film_held_by_force(settings.film_error, beta)
+    if derivatives and near_dry and settings.dr is None:
+        settings = dataclasses.replace(
+            settings, dr=mesh_from_tolerance(settings.rtol)[0] / DRY_DERIVATIVE_REFINEMENT)
     rim = _contact_edge(settings, drive, z0, indenter)
-    if rim is not None and rim > 0 and film_held_by_force(settings.film_error, beta):
+    if rim is not None and rim > 0 and near_dry:
         dr = mesh_parameters(settings)[0]
         return settings_mesh(settings, rim, settings.contact_refinement,
                              min(DRY_RIM_REFINEMENT, settings.rim_refinement),

@@ -2,7 +2,9 @@
 steps (lubjax/_adjoint.py).
 
 Its derivatives are those of the accepted steps alone, with the steps' times and formulae held
-fixed (the controller's choices are not differentiated, as in diffrax).
+fixed (the controller's choices are not differentiated, as in diffrax). A differentiated run
+takes its steps with the near-dry film held tighter than a plain run's
+(``Tolerance.for_tangents``).
 """
 
 from __future__ import annotations
@@ -57,6 +59,9 @@ def _rollout(inputs: Inputs) -> Trajectory:
 
 def _rollout_jvp(primals, tangents):
     (inputs,), (inputs_dot,) = primals, tangents
+    # A run whose derivatives are taken holds a near-dry film tighter (Tolerance.for_tangents):
+    # its values are those of that run, within the tolerance of the plain run's.
+    inputs = inputs._replace(tol=inputs.tol.for_tangents())
     traj, rec = _recorded_loop(inputs)
     leaves, treedef = jax.tree_util.tree_flatten(inputs)
     dots = jax.tree_util.tree_leaves(

@@ -294,17 +294,18 @@ def relax(
     t_start = float(drive_v.t_start)
     t_end_v = check_t_end(t_end_v, t_start)
     ptimes = check_times(profile_times, "profile_times", t_start, t_end_v)
+    # With a derivative to take, the run itself goes through jit with its inputs' derivatives
+    # attached (on the mesh mesh_for gives a differentiated run); the error estimate's runs are
+    # not differentiated.
+    differentiated = any_traced((beta, z0, drive, substrate, indenter))
     if mesh is None:
         mesh = mesh_for(settings, drive=drive_v, beta=beta_v, z0=z0_v, t_end=t_end_v,
-                        indenter=indenter_v)
+                        indenter=indenter_v, derivatives=differentiated)
     disc = discretise(mesh, substrate_v, indenter_v)
     tol = settings.tolerance()
     runs = [(disc, tol, ptimes)]
     if settings.error_estimate:
         runs += estimate_runs(mesh, substrate_v, indenter_v, tol, ptimes)
-    # With a derivative to take, the run itself goes through jit with its inputs' derivatives
-    # attached; the error estimate's runs are not differentiated.
-    differentiated = any_traced((beta, z0, drive, substrate, indenter))
     report = progress if progress is not None else (lambda phase: None)
     report("compiling the solver")
     compiled, compile_s = _compiled_rollouts(runs[differentiated:], drive_v, substrate_v)

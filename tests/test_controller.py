@@ -218,6 +218,22 @@ def test_force_film_scale_is_two_thirds_of_the_indentation_where_that_is_larger(
                                [2e-4, 0.1, 0.5])
 
 
+def test_the_film_cap_bounds_the_force_norm_and_a_derivative_lowers_it():
+    """Under the force norm a thin film is held to at most cap × rtol of itself: with the
+    default cap (FILM_CAP = 10³) a film of 2e-4 in an indentation of 0.3 is held to 0.2, with
+    TANGENT_FILM_CAP (100) to 0.02. Tolerance.for_tangents (a differentiated run's) lowers the
+    cap to that and keeps a lower one."""
+    film = jnp.asarray([1e-4, 0.1, 0.5])
+    previous = _level(1.0, film=0.0)._replace(film=jnp.asarray([2e-4, 0.1, 0.4]))
+    level = previous._replace(film=film, gap=jnp.asarray(-0.3))
+    derived = TOL.for_tangents()
+    assert TOL.film_cap == ctrl.FILM_CAP and float(derived.film_cap) == ctrl.TANGENT_FILM_CAP
+    assert float(ctrl.Tolerance(film_cap=10.0).for_tangents().film_cap) == 10.0
+    np.testing.assert_allclose(
+        np.asarray(ctrl.film_scale(level, previous, "force", 1e9, derived.film_cap)),
+        [0.02, 0.2, 0.5])
+
+
 def test_a_film_falling_faster_than_bdf_stays_positive_makes_the_step_backward_euler():
     """BDF2's history term (1 + ω)h̄ⁿ - ω²/(1 + ω) h̄ⁿ⁻¹ is not positive where h̄ⁿ⁻¹ ≥
     (1 + 1/ω)² h̄ⁿ: a fourfold fall at equal steps, ninefold at a step half as long; BDF3's

@@ -7,6 +7,7 @@ import pytest
 import lubjax
 from lubjax._mesh import (
     DRY_CONTACT_SLOPE,
+    DRY_DERIVATIVE_REFINEMENT,
     DRY_RIM_REFINEMENT,
     NEAR_DRY_BETA,
     _contact_refinement,
@@ -140,3 +141,23 @@ def test_near_dry_contacts_are_refined_for_the_force_not_the_film(beta):
     # a sphere that just touches (z̄ ≥ 0: the film carries the force) keeps the axis rule
     assert lubjax.mesh_for(default, drive=RAMP, beta=beta, z0=1.0, t_end=5.0) == \
         lubjax.mesh_for(relative, drive=RAMP, beta=beta, z0=1.0, t_end=5.0)
+
+
+def test_a_differentiated_near_dry_run_gets_the_whole_mesh_finer():
+    """Near dry, mesh_for(derivatives=True) is the near-dry mesh of a Δr̄ DRY_DERIVATIVE_
+    REFINEMENT times finer (the derivatives' spikes where the trapped film's neck crosses a
+    node, docs/accuracy.md#derivatives); below NEAR_DRY_BETA, or with a given Settings.dr, the
+    plain run's mesh."""
+    default = lubjax.Settings()
+    dr = default.mesh_parameters()[0]
+    finer = lubjax.Settings(dr=dr / DRY_DERIVATIVE_REFINEMENT)
+    scene = dict(drive=RAMP, z0=0.5, t_end=5.0)
+    derived = lubjax.mesh_for(default, beta=1e9, derivatives=True, **scene)
+    assert derived == lubjax.mesh_for(finer, beta=1e9, **scene)
+    assert derived.size > lubjax.mesh_for(default, beta=1e9, **scene).size
+    below = np.nextafter(NEAR_DRY_BETA, 0.0)
+    assert lubjax.mesh_for(default, beta=below, derivatives=True, **scene) == \
+        lubjax.mesh_for(default, beta=below, **scene)
+    given = lubjax.Settings(dr=0.02)
+    assert lubjax.mesh_for(given, beta=1e9, derivatives=True, **scene) == \
+        lubjax.mesh_for(given, beta=1e9, **scene)
