@@ -9,9 +9,10 @@ converged runs, over the stability map, every drive and substrate; and what they
     python -m benchmarks.derivative_map --min-beta 1e9 --rtol 3e-5
                                                       # AD at a tighter tolerance
 
-Each cell is a run on the mesh :func:`lubjax.relax` gives it (``lubjax.mesh_for``, default
-settings) with its response read at ``TIMES_PER_CELL`` times in [t_end/12, t_end]: F̄ for a
-prescribed travel and a spring, the gap z̄ under a load and for a free sphere. On that mesh:
+Each cell is a run on the mesh :func:`lubjax.relax` gives it when differentiated
+(``lubjax.mesh_for(..., derivatives=True)``, default settings) with its response read at
+``TIMES_PER_CELL`` times in [t_end/12, t_end]: F̄ for a prescribed travel and a spring, the
+gap z̄ under a load and for a free sphere. On that mesh:
 
 * AD: ``jax.jacfwd`` and ``jax.jacrev`` of the response with respect to (ln β, z̄0), at the
   default tolerance (rtol 1e-4);
@@ -39,7 +40,9 @@ Cells (``--quick``: the first four β of each group and z̄0 ∈ {0.5}):
 
 ``--cost``: warm times of the primal, ``jax.grad`` of a scalar and ``jax.jacfwd`` in (β, z̄0)
 of relax's run (β = 100, z̄0 = 0.5, t̄ ≤ 5, default settings, no error estimate) at
-``max_steps`` 500, 2000, 20 000 and 80 000, and the ratios to the primal (each the best of 3).
+``max_steps`` 500, 2000, 20 000 and 80 000, and the ratios to the primal (each the best of 3);
+and near dry (β = 10⁹, z̄0 = 0.1), where a differentiated relax runs on a finer mesh with the
+film held tighter, the same three of relax itself (:func:`near_dry_cost`).
 
 ``--dr``: the cells' meshes with this fine-zone spacing Δr̄ (``Settings.dr``; default the
 tolerance's, 0.014), to tell what the mesh does to a derivative from what the steps do;
@@ -115,7 +118,8 @@ def check_cell(drive, substrate, beta, z0, t_end, channel, ref_rtol=REF_RTOL, dr
     its fine zone's spacing, default the default tolerance's); returns a dict of the errors per
     parameter and the cell's facts."""
     settings = lubjax.Settings(error_estimate=False, dr=dr)
-    mesh = lubjax.mesh_for(settings, drive=drive, beta=beta, z0=z0, t_end=t_end)
+    mesh = lubjax.mesh_for(settings, drive=drive, beta=beta, z0=z0, t_end=t_end,
+                           derivatives=True)
     disc = discretise(mesh, substrate)
     if rtol is not None:  # the steps' tolerance only: the mesh stays the default's
         settings = dataclasses.replace(settings, rtol=rtol)
@@ -277,7 +281,46 @@ def cost(args, argv):
     lines += ["", f"One LU factorisation of the run's {size}×{size} system: {1e3 * lu:.3f} ms; "
               f"the primal's time per accepted step: {1e3 * primal / accepted:.3f} ms."]
     print(lines[-1], flush=True)
+    lines += near_dry_cost()
     _harness.write_report(os.path.join(os.path.dirname(args.out), "derivative_cost.md"), lines)
+
+
+def near_dry_cost(beta=1e9, z0=0.1, t_end=5.0):
+    """Near dry a differentiated relax runs on a finer mesh with the film held tighter
+    (``mesh_for(derivatives=True)``, ``Tolerance.for_tangents``): warm times of the plain run
+    and of ``jax.grad`` and ``jax.jacfwd`` of relax itself, and each run's steps."""
+    settings = lubjax.Settings(error_estimate=False)
+    times = np.linspace(0.1, t_end, 50)
+
+    def total(p):
+        return jnp.sum(lubjax.relax(p[0], p[1], t_end, settings=settings).at(times))
+
+    p = jnp.array([beta, z0])
+    plain = lubjax.relax(beta, z0, t_end, settings=settings)
+    traced = {}
+
+    def steps_of(p):  # the differentiated run's Result (its counters are concrete)
+        traced["result"] = lubjax.relax(p[0], p[1], t_end, settings=settings)
+        return jnp.sum(traced["result"].at(times))
+
+    jax.jvp(steps_of, (p,), (jnp.array([0.0, 1.0]),))
+    derived = traced["result"]
+    primal = _best(lambda q: lubjax.relax(float(q[0]), float(q[1]), t_end,
+                                          settings=settings).force, p)
+    grad = _best(jax.grad(total), p)
+    forward = _best(jax.jacfwd(total), p)
+    lines = [
+        "", f"Near dry, β = {beta:g}, z̄0 = {z0:g}, t̄ ≤ {t_end:g} (relax itself, default "
+        "settings, no error estimate, warm, best of 3): the plain run on "
+        f"{plain.r.size} nodes, {plain.accepted} accepted steps; the differentiated one on "
+        f"{derived.r.size} nodes, {int(derived.accepted)} steps.", "",
+        "| primal [s] | grad [s] | jacfwd [s] | grad / primal | jacfwd / primal |",
+        "|---|---|---|---|---|",
+        f"| {primal:.3f} | {grad:.3f} | {forward:.3f} | {grad / primal:.1f} | "
+        f"{forward / primal:.1f} |",
+    ]
+    print("\n".join(lines), flush=True)
+    return lines
 
 
 def main(argv=None):
