@@ -126,7 +126,7 @@ class Tolerance:
         Why: under the "force" norm the film inside a near-dry contact may err by a tenth of
         itself, which the force does not feel; its derivatives do. At β = 10⁹, z̄0 = 0.1 the
         tangent dF̄/dz̄0 in a hold to t̄ = 10 is off Hertz's by 4 % to NaN, depending on the
-        rounding of z̄0, with a cap of 10³, and within 3·10⁻⁴ with 100 on the finer contact mesh
+        rounding of z̄0, with a cap of 10³, and within 8·10⁻⁴ with 100 on the finer contact mesh
         :func:`lubjax.mesh_for` gives a differentiated run (docs/accuracy.md#derivatives).
         Neither alone suffices; under the "relative" norm (β < 10⁵ with "auto") nothing changes.
 

@@ -232,6 +232,12 @@ def relax(
     not made, ``check`` acts as "flag", and the per-step series are the loop's entries padded
     to ``Settings.max_steps + 1`` (read them with :meth:`Result.at`).
 
+    Near dry (β ≥ 10⁵ with the default ``film_error="auto"``) a differentiated run is a finer
+    run: its contact mesh 1.4× finer (``mesh_for(..., derivatives=True)``) and its film held to
+    100 rtol of itself instead of 10³, without which the derivative in a long hold at
+    β ≳ 10⁸ can be off by per cents or NaN (docs/accuracy.md#derivatives). Its values are that
+    run's, within the tolerance of the plain run's; it costs ~2× the plain run's mesh and steps.
+
     Args:
         beta: β (eq 8e), in [1e-4, 1e9].
         z0: z̄0 = z0/d_c (the initial gap in units of d_c), in [1e-4, 1e3].
@@ -252,7 +258,8 @@ def relax(
         progress: None (quiet, the default), or a callable told each phase as it starts
             ("compiling the solver", "running the solver", "estimating the error"): the
             command line's progress line shows it.
-        mesh: the mesh to run on (default: :func:`lubjax.mesh_for`, the one the run needs).
+        mesh: the mesh to run on (default: :func:`lubjax.mesh_for`, the one the run needs,
+            told whether a derivative is taken).
         indenter: ``Paraboloid()`` (default, eq 8a) or ``Sphere(d_c/R)``, the sphere's true
             profile for deep indentation (lubjax/_shape.py); its ε = d_c/R is a leaf that
             ``jit``, ``vmap`` and ``grad`` see.
