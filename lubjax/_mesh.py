@@ -396,11 +396,12 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None,
     check_parameters(beta, z0)
     check_number("t_end", t_end, 0.0, T_END_MAX, lo_open=True)
     beta, t_end = float(beta), float(t_end)
+    near_dry = film_held_by_force(settings.film_error, beta)
     if drive.inertia:  # a free sphere: a collision, not a contact the run ends in
         rim = None
         if settings.contact_radius == "auto":
             rim = final_contact_radius(drive, float(z0), mesh_parameters(settings)[0], indenter)
-        if rim is not None and not film_held_by_force(settings.film_error, beta):
+        if rim is not None and not near_dry:
             # a rebound contact reaching the fine zone's end widens it: its film is thinnest there
             if rim >= 0.95 * settings.r_fine:
                 settings = dataclasses.replace(settings, r_fine=1.25 * rim)
@@ -408,7 +409,6 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None,
             return settings_mesh(settings, rim, collision, collision)
         return settings_mesh(settings, None, _interior_refinement(settings, beta, t_end),
                              _rim_refinement(settings, beta, t_end))
-    near_dry = film_held_by_force(settings.film_error, beta)
     if derivatives and near_dry and settings.dr is None:
         settings = dataclasses.replace(
             settings, dr=mesh_from_tolerance(settings.rtol)[0] / DRY_DERIVATIVE_REFINEMENT)
