@@ -23,6 +23,8 @@ Writes benchmarks/out/near_dry_tangent.md. About 10 minutes on one core.
 
 from __future__ import annotations
 
+from unittest import mock
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -41,16 +43,13 @@ QUICK_CELLS = [(1e9, 0.1), (1e9, 0.0997)]
 
 def hertz_error(beta, z0, cap, refinement):
     """The largest |dF̄/dz̄0 / Hertz's - 1| in the hold, with the two constants set."""
-    saved = _controller.TANGENT_FILM_CAP, _mesh.DRY_DERIVATIVE_REFINEMENT
-    _controller.TANGENT_FILM_CAP, _mesh.DRY_DERIVATIVE_REFINEMENT = cap, refinement
-    jax.clear_caches()  # the cap is a constant of the compiled program
-    try:
-        settings = lubjax.Settings(error_estimate=False)
+    settings = lubjax.Settings(error_estimate=False)
+    with (mock.patch.object(_controller, "TANGENT_FILM_CAP", cap),
+          mock.patch.object(_mesh, "DRY_DERIVATIVE_REFINEMENT", refinement)):
+        jax.clear_caches()  # the cap is a constant of the compiled program
         slope = np.asarray(jax.jacfwd(lambda z: lubjax.relax(
             beta, z, T_END, settings=settings).at(HOLD_TIMES))(jnp.asarray(z0)))
-    finally:
-        _controller.TANGENT_FILM_CAP, _mesh.DRY_DERIVATIVE_REFINEMENT = saved
-        jax.clear_caches()
+    jax.clear_caches()
     if not np.all(np.isfinite(slope)):
         return float("nan")
     return float(np.max(np.abs(slope / (-np.pi * np.sqrt(1.0 - z0)) - 1.0)))
