@@ -6,7 +6,7 @@ against (``Settings.film_error``), and the force's accuracy there against conver
 
 Steps: relax(β, z̄0, 5) at the default tolerance, β ∈ {10², 10⁴, ..., 10⁹} × z̄0 ∈ {0.1, 0.5, 1}
 (no error estimate: its coarse runs do not change the steps counted), accepted steps and run
-time, with ``film_error="auto"`` (the default), ``"relative"`` (the fits') and ``"force"``,
+time, with ``film_error="auto"`` (the default), ``"relative"`` and ``"force"``,
 and the ratio to the β = 100 run of the same z̄0 and norm (the target: at most 3). A run that
 did not reach t̄ = 5 is marked "budget" with the time it reached.
 

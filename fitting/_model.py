@@ -59,17 +59,17 @@ from lubjax._fitting_api import sharding as _sharding
 from ._scales import Scales, channels, drive_unit, history, noise_level
 from ._trace import DRIVES, Trace, check_scales
 
-FIT_SETTINGS = lubjax.Settings(rtol=3e-4, force_floor=1e-5, max_steps=5000,
-                               film_error="relative")
+FIT_SETTINGS = lubjax.Settings(rtol=3e-4, force_floor=1e-5, max_steps=5000)
 """The accuracy of the model inside fits: ``lubjax.Settings(rtol=3e-4, force_floor=1e-5,
-max_steps=5000, film_error="relative")``. rtol = 3e-4 keeps the model's error at the true
-parameters of the bundled traces to 2e-3 of the peak (rms 1.5e-4); the force is held to rtol
-only down to 1e-5 of its peak (a load cell's noise is ≥ 1e-3 of it); a bundled trace takes
-about 300 of the 5000 attempts. The film keeps the relative control, not relax's default
-"auto" (the force norm from β = 10⁵ on): under the force norm the model's value moves between
-neighbouring parameters by a fraction of its tolerance (its steps change), and a fit follows
-that where the data do not determine a parameter (docs/guide/fitting.md, near-dry contacts).
-The model's remaining error at the optimum is estimated and folded into the reported errors."""
+max_steps=5000)``. rtol = 3e-4 keeps the model's error at the true parameters of the bundled
+traces to 2e-3 of the peak (rms 1.5e-4); the force is held to rtol only down to 1e-5 of its
+peak (a load cell's noise is ≥ 1e-3 of it); a bundled trace takes about 300 of the 5000
+attempts. The film error is relax's default "auto": the force norm near dry (β ≥ 10⁵), where
+the relative norm would hold a film far thinner than anything the force sees to itself in
+thousands of steps; the Jacobian's runs hold that film tighter (a derivative's film cap,
+``lubjax.stepper.Tolerance.for_tangents``), so its tangents are sound there (docs/guide/fitting.md,
+near-dry contacts). The model's remaining error at the optimum is estimated and folded into
+the reported errors."""
 
 
 @dataclasses.dataclass(frozen=True)

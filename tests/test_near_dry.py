@@ -25,6 +25,7 @@ Run cost (this module, 2-core VM): the default's runs take ~1 s each at β ≤ 1
 ones 2-3× that; β = 10⁹ with the error estimate ~25 s (marked slow).
 """
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -219,32 +220,43 @@ GRAD_BETA, GRAD_T_END, GRAD_TIMES = 5.4e6, 3.0, np.linspace(0.05, 3.0, 60)
 
 
 def _force_and_tangent(mesh, settings):
+    """dF̄/dz̄0 of the fits' model (jvp at ``settings``) and central differences (step 1e-3) of
+    runs at rtol 1e-6 on the same mesh: the reference the tangent should meet, not the
+    differences of runs at the model's own tolerance (their steps move with z̄0 under the
+    force norm)."""
     import jax
 
     from lubjax.stepper import discretise, evaluate, rollout
 
     disc, drive = discretise(mesh), lubjax.Travel()
 
-    def force(z0):
-        traj = rollout(disc, GRAD_BETA, z0, drive, GRAD_T_END, settings.tolerance())
+    def force(z0, tolerance):
+        traj = rollout(disc, GRAD_BETA, z0, drive, GRAD_T_END, tolerance)
         return evaluate(traj.steps, GRAD_TIMES, "force")
 
-    f, tangent = jax.jvp(force, (Z0,), (1.0,))
-    step = 1e-4
-    central = (np.asarray(force(Z0 + step)) - np.asarray(force(Z0 - step))) / (2 * step)
+    _, tangent = jax.jvp(lambda z0: force(z0, settings.tolerance()), (Z0,), (1.0,))
+    converged = jax.jit(lambda z0: force(
+        z0, lubjax.Settings(rtol=1e-6, max_steps=100_000).tolerance()))
+    step = 1e-3
+    central = (np.asarray(converged(Z0 + step)) - np.asarray(converged(Z0 - step))) / (2 * step)
     return np.asarray(tangent), central
 
 
 @pytest.mark.slow
 def test_near_dry_derivative_on_the_fits_mesh_matches_central_differences():
-    """The fits' model (film_error="relative" on relax's mesh for the run, rtol 3e-4): dF̄/dz̄0
-    along the whole run agrees with central differences (step 1e-4) to 1e-3 of its largest
-    value, so Gauss-Newton sees the true sensitivities of a near-dry trace."""
-    settings = lubjax.Settings(rtol=3e-4, film_error="relative", error_estimate=False)
+    """The fits' model (``fitting.FIT_SETTINGS``: rtol 3e-4, the default "auto" film norm, so
+    the force norm here, and a derivative's film cap) on the mesh a fit of this trace runs on
+    (relax's for the run, ``fitting.fit_mesh``): dF̄/dz̄0 along the whole run agrees with
+    central differences of converged runs on that mesh to 1.5e-3 of its largest value (seen
+    5.6e-4; the reference's truncation error at its step 1e-3 is ~3e-4), so Gauss-Newton sees
+    the true sensitivities of a near-dry trace."""
+    import fitting
+
+    settings = dataclasses.replace(fitting.FIT_SETTINGS, error_estimate=False)
     mesh = lubjax.mesh_for(settings, drive=lubjax.Travel(), beta=GRAD_BETA, z0=Z0,
                            t_end=GRAD_T_END)
     tangent, central = _force_and_tangent(mesh, settings)
-    assert np.max(np.abs(tangent - central)) < 1e-3 * np.max(np.abs(central))
+    assert np.max(np.abs(tangent - central)) < 1.5e-3 * np.max(np.abs(central))
 
 
 def _relax_derivatives(beta, z0, times):
