@@ -22,11 +22,22 @@ def pytest_addoption(parser):
 
 
 def pytest_configure(config):
-    """The programs the tests jit themselves (jax.jit of a jacfwd, of a loss) compile with the
+    """Spread the tests over xdist's workers by work stealing, and compile the tests' own
+    programs with lubjax's XLA option.
+
+    Work stealing: under ``-n`` without ``--dist``, xdist's "load" scheduling hands each worker
+    a long queue up front and never takes it back; the suite's long tests landed in one queue
+    (one worker ran 860 s of tests while the other finished after 510 s). "worksteal" lets an
+    idle worker take from a busy one's queue.
+
+    The programs the tests jit themselves (jax.jit of a jacfwd, of a loss) compile with the
     XLA option lubjax's own programs take on the CPU (lubjax/_compiler.py: the classic emitters,
     about twice as fast to compile, code as fast). Set in XLA_FLAGS before any backend starts
     (the xdist workers inherit it), and only where this jaxlib knows the flag: XLA aborts on an
     unknown one, so a child process tries it first."""
+    if getattr(config.option, "dist", None) == "load" and getattr(
+            config.option, "numprocesses", None):
+        config.option.dist = "worksteal"
     flag = "--xla_cpu_use_fusion_emitters=false"
     if "xla_cpu_use_fusion_emitters" in os.environ.get("XLA_FLAGS", ""):
         return
