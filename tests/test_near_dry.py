@@ -246,10 +246,10 @@ def _force_and_tangent(mesh, settings):
 def test_near_dry_derivative_on_the_fits_mesh_matches_central_differences():
     """The fits' model (``fitting.FIT_SETTINGS``: rtol 3e-4, the default "auto" film norm, so
     the force norm here, and a derivative's film cap) on the mesh a fit of this trace runs on
-    (relax's for the run, ``fitting.fit_mesh``): dF̄/dz̄0 along the whole run agrees with
-    central differences of converged runs on that mesh to 1.5e-3 of its largest value (seen
-    5.6e-4; the reference's truncation error at its step 1e-3 is ~3e-4), so Gauss-Newton sees
-    the true sensitivities of a near-dry trace."""
+    (relax's for the run, ``fitting._problem.fit_mesh``): dF̄/dz̄0 along the whole run agrees
+    with central differences of converged runs on that mesh to 1.5e-3 of its largest value
+    (seen 5.6e-4; the reference's truncation error at its step 1e-3 is ~3e-4), so Gauss-Newton
+    sees the true sensitivities of a near-dry trace."""
     import fitting
 
     settings = dataclasses.replace(fitting.FIT_SETTINGS, error_estimate=False)
