@@ -411,7 +411,7 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None,
                              _rim_refinement(settings, beta, t_end))
     if derivatives and near_dry and settings.dr is None:
         settings = dataclasses.replace(
-            settings, dr=mesh_from_tolerance(settings.rtol)[0] / DRY_DERIVATIVE_REFINEMENT)
+            settings, dr=mesh_parameters(settings)[0] / DRY_DERIVATIVE_REFINEMENT)
     rim = _contact_edge(settings, drive, z0, indenter)
     if rim is not None and rim > 0 and near_dry:
         dr = mesh_parameters(settings)[0]
