@@ -35,7 +35,11 @@ from lubjax import _controller, _mesh
 
 HOLD_TIMES = np.linspace(1.5, 10.0, 20)
 T_END = 10.0
-VARIANTS = {"plain": (1e3, 1.0), "cap": (100.0, 1.0), "mesh": (1e3, 1.4), "both": (100.0, 1.4)}
+# (film cap, mesh refinement) of each column: "both" is what relax does
+_PLAIN_CAP, _CAP = _controller.FILM_CAP, _controller.TANGENT_FILM_CAP
+_FINER = _mesh.DRY_DERIVATIVE_REFINEMENT
+VARIANTS = {"plain": (_PLAIN_CAP, 1.0), "cap": (_CAP, 1.0), "mesh": (_PLAIN_CAP, _FINER),
+            "both": (_CAP, _FINER)}
 CELLS = [(1e9, z0) for z0 in (0.05, 0.0997, 0.1, 0.1003, 0.1007, 0.5)] + [
     (1e8, z0) for z0 in (0.0997, 0.1)]
 QUICK_CELLS = [(1e9, 0.1), (1e9, 0.0997)]
