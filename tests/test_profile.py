@@ -73,6 +73,30 @@ def test_lm_stops_at_the_dry_limit_where_it_walked_on(seed):
         assert plain.converged
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_steps_that_lower_the_viscosity_may_span_floor_step_e_folds(seed, monkeypatch):
+    """Data made at η = 0.05 and a start 6 e-folds above it (the near-dry start, at the bound
+    the noise sets): LM reaches the same interior optimum with steps lowering ln η by up to
+    ``FLOOR_STEP`` = 3 as with unit steps, in fewer iterations; a step whose longest part
+    raises η, or moves another parameter, keeps the unit cap."""
+    assert _optimisers.step_cap(np.array([0.1, -2.0]), [0, 1], [1]) == _optimisers.FLOOR_STEP
+    assert _optimisers.step_cap(np.array([0.1, 2.0]), [0, 1], [1]) == 1.0
+    assert _optimisers.step_cap(np.array([-3.0, -2.0]), [0, 1], [1]) == 1.0
+    assert _optimisers.step_cap(np.array([-2.0]), [1], [1]) == _optimisers.FLOOR_STEP
+    evaluate, _ = _problem(0.05, seed)
+    start = [np.array([0.0, math.log(20.0)])]
+    ends = []
+    for cap in (1.0, _optimisers.FLOOR_STEP):
+        monkeypatch.setattr(_optimisers, "FLOOR_STEP", cap)
+        ends.append(_optimisers.lm(evaluate, start, [N], max_iter=60, tol=1e-4, floors=[[1]])[0])
+    unit, long = ends
+    assert unit.converged and long.converged
+    assert long.iterations < unit.iterations
+    # the same optimum, to the 1 % of a standard error the decrement tolerance leaves
+    se = np.sqrt(np.diag(np.linalg.inv(unit.J.T @ unit.J)) * (unit.r @ unit.r) / (N - 2))
+    assert np.all(np.abs(long.x - unit.x) < 0.03 * se), (long.x - unit.x) / se
+
+
 @pytest.mark.parametrize("eta_true, seed", [(0.0, 0), (0.0, 1), (0.0, 3), (0.01, 2),
                                             (0.05, 4), (0.05, 5), (0.1, 6), (0.1, 7)])
 def test_profile_interval_matches_the_closed_form(eta_true, seed):
