@@ -327,7 +327,7 @@ def relax(
         ]
         if differentiated:
             trajs.insert(0, _differentiable_rollout(discretise(mesh, substrate_v, indenter), beta,
-                                                    z0, history, substrate, t_end_v, ptimes, tol))
+                                                    z0, drive, substrate, t_end_v, ptimes, tol))
     run_s = time.perf_counter() - start
     if settings.error_estimate:
         report("estimating the error")
