@@ -163,8 +163,8 @@ def test_relax_differentiates_the_drive_it_is_given(drive):
     """jax.jvp of relax itself with ``drive=`` (in z̄0 and the drive's first number): its values
     are the plain run's and its tangent is the stepper's on relax's differentiated mesh, whose
     drive derivatives test_drive_gradients_reverse_forward_and_differences checks against
-    central differences. (relax once ran the default ramp-and-hold whenever a derivative was
-    taken through ``drive=``.)"""
+    central differences: the differentiated run is the given drive's, not the default
+    ramp-and-hold."""
     times = jnp.array([0.5, 1.0, 2.0])
     leaves, treedef = jax.tree_util.tree_flatten(drive)
 
