@@ -2,11 +2,12 @@ r"""The optimisers of a fit (``method=``), each on every problem of the fit.
 
 * ``"lm"`` (default): Levenberg–Marquardt on the forward-mode Jacobian J = ∂r/∂x. Step
   (JᵀJ + λ diag JᵀJ) δ = -Jᵀr, accepted when S decreases (then λ ← λ/3, else λ ← 4λ), with
-  |δ_i| ≤ 1 (a factor e per step in E*, η, z0; ≤ ``FLOOR_STEP`` where the step's longest part
-  lowers the viscosity, :func:`step_cap`). A step whose run makes the film negative or
-  non-finite counts as rejected. The Jacobian comes with the residuals at about the cost of one
-  run (the tangents reuse the step's factorisation), so every trial evaluates both: one model run
-  per iteration. As optimistix writes a solver: a state (:class:`LMState`), :func:`lm_init`,
+  each |δ_i| ≤ 1 (a factor e per step in E*, η, z0; ≤ ``FLOOR_STEP`` where it lowers the
+  viscosity): the least value of the step's quadratic model within those caps
+  (:func:`capped_step`). A step whose run makes the film negative or non-finite counts as
+  rejected. The Jacobian comes with the residuals at about the cost of one run (the tangents
+  reuse the step's factorisation), so every trial evaluates both: one model run per
+  iteration. As optimistix writes a solver: a state (:class:`LMState`), :func:`lm_init`,
   :func:`lm_terminate` and :func:`lm_step`, composed by :func:`lm`.
 * ``"trf"``: ``scipy.optimize.least_squares`` (trust-region reflective) on the same residuals
   and Jacobian, one problem after another (benchmarks/fit_benchmark.py compares the two). It is
@@ -27,12 +28,11 @@ converged, at the model's accuracy (the message says which and gives the decreme
 
 The dry limit (``floors``, LM only: the viscosity): where the film's force is below the noise,
 the optimum of η is its bound 0, which the log scale puts at infinity. LM would walk η down
-until ``max_iter``, and with the step's length capped by η's ever longer steps the other
-parameters would hardly move (on 9 of 20 near-dry noise draws: 60 iterations, not converged).
-Once the Gauss–Newton step lowers η where an e-fold of η changes χ² by less than
-``fitting._profile.FLAT`` s² (the film's force there is under a tenth of the noise), η is held
-where it is and the others converge alone; the message says so, and η's interval comes from
-the profile of χ² (``fitting._profile``).
+a capped step at a time until the film's force is lost in rounding (tests/test_profile.py: 24
+iterations on a stand-in, against 4). Once the Gauss–Newton step lowers η where an e-fold of η
+changes χ² by less than ``fitting._profile.FLAT`` s² (the film's force there is under a tenth
+of the noise), η is held where it is and the others converge alone; the message says so, and
+η's interval comes from the profile of χ² (``fitting._profile``).
 """
 
 from __future__ import annotations
@@ -65,7 +65,7 @@ STALL_DECREMENT = 0.05
 #: stuck at decrement 0.096 (0.3 SE), while compiling the model with other (equally valid)
 #: rounding converged 0.2 SE away in 14 iterations.
 NOISE_DECREMENT = 0.25
-#: The longest step, in e-folds, of a step whose longest part lowers the viscosity (step_cap).
+#: The longest step, in e-folds, that lowers the viscosity (step_caps).
 FLOOR_STEP = 3.0
 METHODS = ("lm", "trf", "lbfgs")
 CONVERGED = "converged (Gauss-Newton decrement below tolerance)"
@@ -178,14 +178,63 @@ def _converged(state: LMState, k, message) -> str:
             f"variance (the data bound it only from above)")
 
 
-def step_cap(delta, free, floors) -> float:
-    """The longest part |δ_i| a step may have, in e-folds: 1, or ``FLOOR_STEP`` where its
-    longest part lowers a parameter of ``floors`` (x indices; ``free``: the x index of each
-    part of δ). Why longer there: lowering the viscosity toward the dry limit flattens the
-    cost, so the Gauss–Newton step rarely overshoots; the unit cap made a near-dry fit walk η
-    down an e-fold per iteration (data/water_dc140.csv: 10 iterations, 8 with this cap)."""
-    lead = int(np.argmax(np.abs(delta)))
-    return FLOOR_STEP if free[lead] in floors and delta[lead] < 0 else 1.0
+def step_caps(delta, free, floors) -> np.ndarray:
+    """The longest each part |δ_i| of a step may be, in e-folds: 1, or ``FLOOR_STEP`` where δ_i
+    lowers a parameter of ``floors`` (x indices; ``free``: the x index of each part of δ).
+    Why longer there: lowering the viscosity toward the dry limit flattens the cost, so the
+    Gauss–Newton step rarely overshoots; the unit cap made a near-dry fit walk η down an
+    e-fold per iteration (data/water_dc140.csv: 10 iterations, 8 with this cap)."""
+    return np.array([FLOOR_STEP if free[i] in floors and delta[i] < 0 else 1.0
+                     for i in range(len(free))])
+
+
+def capped_step(M, g, caps_of) -> np.ndarray:
+    """The step δ of the damped normal equations M δ = -g held within its caps
+    (``caps_of(δ)`` of the unconstrained step): the least value of the quadratic model
+    ½δᵀMδ + gᵀδ over the box |δ_i| ≤ cap_i (M is positive definite), by the primal
+    active-set method from δ = 0: solve with the held parts fixed; move toward that solution
+    until a part meets its cap (then hold it) or take it and release the held part whose
+    multiplier points into the box. Within the caps it is the Gauss–Newton step itself.
+
+    Departs from scaling the whole step down to its longest part's cap: near dry η's
+    Gauss–Newton step can be many e-folds, and scaling shrank E*'s and z0's steps with it, so
+    they crept while η swung an e-fold up and down from one iteration to the next (4 of 50
+    near-dry draws under AR(1) noise ran to the iteration cap; docs/accuracy.md)."""
+    try:
+        delta = -np.linalg.solve(M, g)
+    except np.linalg.LinAlgError:
+        delta = -g / (np.diag(M) + 1e-300)
+        caps = caps_of(delta)
+        return np.clip(delta, -caps, caps)
+    caps = caps_of(delta)
+    if np.all(np.abs(delta) <= caps):
+        return delta
+    x, held = np.zeros_like(delta), np.zeros(delta.size, bool)
+    for _ in range(8 * delta.size):
+        free = ~held
+        target = x.copy()
+        if free.any():
+            try:
+                target[free] = np.linalg.solve(M[np.ix_(free, free)],
+                                               -(g[free] + M[np.ix_(free, held)] @ x[held]))
+            except np.linalg.LinAlgError:
+                return np.clip(delta, -caps, caps)
+        d = target - x
+        over = free & (np.abs(target) > caps)
+        if over.any():  # move to the first cap met on the way
+            reach = (np.sign(d[over]) * caps[over] - x[over]) / d[over]
+            first = np.flatnonzero(over)[np.argmin(reach)]
+            x = x + np.min(reach) * d
+            x[first] = np.sign(d[first]) * caps[first]
+            held[first] = True
+            continue
+        x = target
+        pull = np.where(held, np.sign(x) * (M @ x + g), -np.inf)  # > 0: wants into the box
+        j = int(np.argmax(pull))
+        if pull[j] <= 1e-12 * (np.max(np.abs(g)) + 1e-300):
+            break
+        held[j] = False
+    return x
 
 
 def lm_step(evaluate: Evaluator, state: LMState, it: int) -> LMState:
@@ -200,11 +249,7 @@ def lm_step(evaluate: Evaluator, state: LMState, it: int) -> LMState:
         A = Jf.T @ Jf
         g = Jf.T @ r
         M = A + lam[k] * np.diag(np.diag(A))
-        try:
-            delta = -np.linalg.solve(M, g)
-        except np.linalg.LinAlgError:
-            delta = -g / (np.diag(M) + 1e-300)
-        delta /= max(1.0, float(np.max(np.abs(delta))) / step_cap(delta, free, state.floors[k]))
+        delta = capped_step(M, g, lambda d, k=k, free=free: step_caps(d, free, state.floors[k]))
         trial[k] = xs[k].copy()
         trial[k][free] += delta
         state.iterations[k] = it

@@ -36,6 +36,26 @@ def _problem(eta_true, seed, shape=SHAPE):
     return evaluate, y
 
 
+def test_a_capped_step_is_the_quadratic_models_least_value_in_the_box():
+    """capped_step on a correlated 3-parameter model: each part within its cap, and no point of
+    the box (a fine grid) lowers the model ½δᵀMδ + gᵀδ below it; the step within its caps
+    is the Gauss–Newton step itself."""
+    M = np.array([[4.0, 1.8, 0.5], [1.8, 1.0, 0.2], [0.5, 0.2, 2.0]])
+    caps = np.array([1.0, 3.0, 1.0])
+
+    def model(d):
+        return 0.5 * d @ M @ d + g @ d
+
+    for g in (np.array([-2.0, 9.0, 0.3]), np.array([10.0, -1.0, -6.0])):
+        step = _optimisers.capped_step(M, g, lambda d: caps)
+        assert np.all(np.abs(step) <= caps + 1e-12)
+        grid = np.stack(np.meshgrid(*[np.linspace(-c, c, 41) for c in caps]), -1).reshape(-1, 3)
+        assert model(step) <= min(model(d) for d in grid) + 1e-12
+    g = np.array([0.2, -0.1, 0.05])
+    np.testing.assert_allclose(_optimisers.capped_step(M, g, lambda d: caps),
+                               -np.linalg.solve(M, g))
+
+
 def _exact_interval(y, level, s2):
     """The interval of η at ``level`` standard errors, from the closed-form profile."""
     X = np.column_stack([np.ones(N), AMP * SHAPE])
@@ -55,17 +75,18 @@ def _fit(evaluate, floors):
 
 @pytest.mark.parametrize("seed", range(6))
 def test_lm_stops_at_the_dry_limit_where_it_walked_on(seed):
-    """Data made at η = 0 (the dry limit): without the floor LM walks ln η down for its whole
-    budget on the draws whose optimum is the bound (not converged); with it, those stop,
-    converged and saying so, in a few iterations, with c at its dry value (the mean of y - 0,
-    within 0.1 of its standard error)."""
+    """Data made at η = 0 (the dry limit): without the floor LM walks ln η down an e-fold per
+    iteration on the draws whose optimum is the bound, until the film's force is lost in
+    rounding (ln η ≈ -25, ≥ 20 iterations); with it, those stop, converged and saying so, in a
+    few iterations, with c at its dry value (the mean of y - 0, within 0.1 of its standard
+    error)."""
     evaluate, y = _problem(0.0, seed)
     plain, floored = _fit(evaluate, None), _fit(evaluate, [[1]])
     assert floored.converged, floored.message
     X = np.column_stack([np.ones(N), AMP * SHAPE])
     u_hat = np.linalg.lstsq(X, y, rcond=None)[0][1]
     if u_hat < 0:  # the optimum is the bound
-        assert not plain.converged and plain.iterations == 60, plain.message
+        assert plain.iterations >= 20 and plain.x[1] < -20, plain.message
         assert "at the dry limit" in floored.message
         assert floored.iterations < 20
         assert abs(floored.x[0] - np.mean(y)) < 0.1 / math.sqrt(N)
@@ -77,12 +98,10 @@ def test_lm_stops_at_the_dry_limit_where_it_walked_on(seed):
 def test_steps_that_lower_the_viscosity_may_span_floor_step_e_folds(seed, monkeypatch):
     """Data made at η = 0.05 and a start 6 e-folds above it (the near-dry start, at the bound
     the noise sets): LM reaches the same interior optimum with steps lowering ln η by up to
-    ``FLOOR_STEP`` = 3 as with unit steps, in fewer iterations; a step whose longest part
-    raises η, or moves another parameter, keeps the unit cap."""
-    assert _optimisers.step_cap(np.array([0.1, -2.0]), [0, 1], [1]) == _optimisers.FLOOR_STEP
-    assert _optimisers.step_cap(np.array([0.1, 2.0]), [0, 1], [1]) == 1.0
-    assert _optimisers.step_cap(np.array([-3.0, -2.0]), [0, 1], [1]) == 1.0
-    assert _optimisers.step_cap(np.array([-2.0]), [1], [1]) == _optimisers.FLOOR_STEP
+    ``FLOOR_STEP`` = 3 as with unit steps, in fewer iterations; a step raising η, and any
+    other parameter's, keeps the unit cap."""
+    caps = _optimisers.step_caps(np.array([-0.1, -2.0, 2.0]), [0, 1, 3], [1, 3])
+    np.testing.assert_array_equal(caps, [1.0, _optimisers.FLOOR_STEP, 1.0])
     evaluate, _ = _problem(0.05, seed)
     start = [np.array([0.0, math.log(20.0)])]
     ends = []
