@@ -365,11 +365,12 @@ def _rough_problem(noise, cell=0.01):
 
 
 def test_lm_ends_rough_costs_by_the_decrement():
-    """Near the optimum of a rough cost no step may lower it, down to λ > 1e12. Then the
-    Gauss–Newton decrement decides: small (the quadratic model's optimum within half a standard
-    error) is convergence at the model's accuracy, large is reported as not converged. Over a
-    scan of roughness levels, every such ending must have the verdict its distance to the smooth
-    optimum calls for, and both verdicts must occur."""
+    """Near the optimum of a rough cost no step may lower it, down to λ > 1e12, or only steps
+    under ``CREEP_STEP`` standard errors do. Then the Gauss–Newton decrement decides: small
+    (the quadratic model's optimum within half a standard error) is convergence at the model's
+    accuracy, large is reported as not converged. Over a scan of roughness levels, every such
+    ending must have the verdict its distance to the smooth optimum calls for, and both
+    verdicts must occur."""
     from fitting import _optimisers
 
     verdicts = set()
@@ -377,7 +378,7 @@ def test_lm_ends_rough_costs_by_the_decrement():
         for noise in np.linspace(0.004, 0.03, 14):
             evaluate, x_opt, se = _rough_problem(noise, cell)
             (out,) = _optimisers.lm(evaluate, [np.array([3.0, 3.0])], [200], max_iter=300, tol=1e-4)
-            if "no decreasing step" not in out.message:
+            if not any(end in out.message for end in ("no decreasing step", "standard errors")):
                 continue
             off = np.max(np.abs(out.x - x_opt) / se)
             verdicts.add(out.converged)
@@ -388,6 +389,28 @@ def test_lm_ends_rough_costs_by_the_decrement():
                 assert "decrement at" in out.message
                 assert off > 0.25, (cell, noise, off, out.message)
     assert verdicts == {True, False}
+
+
+def test_lm_ends_a_creep_of_short_steps_where_the_long_damping_would(monkeypatch):
+    """On a cost rough on a fine scale (cells of 0.003 in x) LM's Gauss–Newton steps are rejected
+    and only damped steps of a few thousandths of a standard error lower it, by the roughness
+    rather than the quadratic model. Two such steps end the fit at the model's accuracy: the
+    point, within 0.02 standard errors, where λ's climb to 1e12 ends it without the rule
+    (``CREEP_STEP = 0``), in under half the iterations."""
+    from fitting import _optimisers
+
+    for noise in (0.012, 0.02, 0.03):
+        evaluate, x_opt, se = _rough_problem(noise, 0.003)
+        (creep,) = _optimisers.lm(evaluate, [np.array([3.0, 3.0])], [200], max_iter=300,
+                                  tol=1e-4)
+        with monkeypatch.context() as m:
+            m.setattr(_optimisers, "CREEP_STEP", 0.0)
+            (climb,) = _optimisers.lm(evaluate, [np.array([3.0, 3.0])], [200], max_iter=300,
+                                      tol=1e-4)
+        assert creep.converged and "standard errors" in creep.message, creep.message
+        assert climb.converged and "no decreasing step" in climb.message, climb.message
+        assert np.max(np.abs(creep.x - climb.x) / se) < 0.02
+        assert 2 * creep.iterations < climb.iterations
 
 
 def test_lbfgs_steps_check_convergence_every_fifth_iteration_and_stop_on_a_non_finite_loss():
