@@ -130,7 +130,10 @@ class Result:
         span = concrete((self.steps.t[0], self.t_end))
         if span is not None:
             times = check_times(times, "times", float(span[0]), float(span[1]))
-        return evaluate(self.steps, jnp.asarray(times, jnp.float64), field)
+        times = jnp.atleast_1d(jnp.asarray(times, jnp.float64))
+        if times.ndim != 1:
+            raise ValueError(f"times must be a scalar or a 1-D sequence, got shape {times.shape}")
+        return evaluate(self.steps, times, field)
 
     def problems(self) -> list[str]:
         """What is wrong with the run, in words (empty when :attr:`ok`).

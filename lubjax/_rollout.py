@@ -49,7 +49,30 @@ def _batched_by_map(fn):
 
 
 _plain_loop = _batched_by_map(lambda inputs: loop(inputs, record=False)[0])
-_recorded_loop = _batched_by_map(lambda inputs: loop(inputs, record=True))
+
+#: Why a second derivative of a run is refused (:func:`_recorded_loop`).
+SECOND_DERIVATIVES = (
+    "second derivatives of a lubjax run (jax.hessian, jvp of grad, grad of jvp, jacfwd of "
+    "jacfwd) are not implemented: a run's derivative replays its accepted steps with their "
+    "times and factorisations held fixed, and that replay is not differentiated again. For a "
+    "Hessian take central differences of jax.grad, or the Gauss-Newton J^T J of jax.jacfwd.")
+
+
+@jax.custom_jvp
+def _recorded_loop(inputs: Inputs):
+    """The run with its records for the derivatives (:func:`_rollout_jvp`). Its own derivative
+    would be a derivative of the derivative: JAX would fail deep inside (an assertion in
+    ``linear_call``'s rule, or a loop it cannot linearize), so it is refused at once with
+    :data:`SECOND_DERIVATIVES`."""
+    return _recorded_loop_batched(inputs)
+
+
+@_recorded_loop.defjvp
+def _recorded_loop_jvp(primals, tangents):
+    raise NotImplementedError(SECOND_DERIVATIVES)
+
+
+_recorded_loop_batched = _batched_by_map(lambda inputs: loop(inputs, record=True))
 
 
 @jax.custom_jvp

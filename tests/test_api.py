@@ -166,6 +166,44 @@ def test_relax_under_jit_and_vmap_is_the_run_alone():
         np.testing.assert_allclose(batched, single, rtol=1e-6)
 
 
+def test_grad_of_relax_under_jit_and_vmap_is_the_plain_grad():
+    """``jax.grad`` of a force value of relax, read at a scalar time as outside a transformation,
+    under ``jit`` and under ``vmap``: the gradient of the run alone on the same mesh (within
+    rounding; the traced path once read a scalar time as a 0-d array and failed)."""
+    settings = lubjax.Settings(dr=0.05, mesh_growth=1.2, length=50.0, rtol=1e-3,
+                               error_estimate=False)
+
+    def force(z):
+        return lubjax.relax(100.0, z, 0.5, settings=settings, mesh=settings.mesh()).at(0.5)[0]
+
+    plain = [float(jax.grad(force)(z)) for z in (0.5, 0.6)]
+    assert np.all(np.isfinite(plain)) and plain[0] != plain[1]
+    np.testing.assert_allclose(float(jax.jit(jax.grad(force))(0.5)), plain[0], rtol=1e-10)
+    np.testing.assert_allclose(jax.vmap(jax.grad(force))(jnp.array([0.5, 0.6])), plain,
+                               rtol=1e-10)
+
+
+def test_second_derivatives_are_refused_with_a_reason():
+    """A derivative of a run's derivative is not implemented (its replay is not differentiated
+    again): every way to ask for one says so, where JAX alone failed an assertion or could not
+    linearize a loop."""
+    settings = lubjax.Settings(dr=0.05, mesh_growth=1.2, length=50.0, rtol=1e-3,
+                               error_estimate=False)
+
+    def force(z):
+        return lubjax.relax(100.0, z, 0.5, settings=settings).at(0.5)[0]
+
+    asks = {
+        "hessian": lambda: jax.hessian(force)(0.5),
+        "jvp of grad": lambda: jax.jvp(jax.grad(force), (0.5,), (1.0,)),
+        "grad of jvp": lambda: jax.grad(lambda z: jax.jvp(force, (z,), (1.0,))[1])(0.5),
+        "jacfwd of jacfwd": lambda: jax.jacfwd(jax.jacfwd(force))(0.5),
+    }
+    for ask in asks.values():
+        with pytest.raises(NotImplementedError, match="second derivatives of a lubjax run"):
+            ask()
+
+
 @pytest.mark.slow
 def test_vmap_and_forward_gradient_in_beta_and_z0():
     settings = lubjax.Settings(dr=0.05, mesh_growth=1.1, length=50.0, rtol=1e-9,
