@@ -100,7 +100,9 @@ def check_positive(name, value, unit: str | None = None) -> float:
 
 def check_quantity(name, value, unit: str, zero: bool = False) -> float:
     """A physical quantity in SI (anything ``float`` reads), finite and > 0 (≥ 0 with
-    ``zero``), as a float."""
+    ``zero``), as a float; tracers pass (a derivative in it is being taken)."""
+    if is_traced(value):
+        return value
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -276,7 +278,7 @@ def travel_over_radius_problem(name: str, value: float, radius: float,
     the fix: the sphere's true profile past the paraboloid's limit, a unit check past the
     sphere's."""
     limit = max_travel_over_radius(indenter)
-    if value <= limit * radius:
+    if is_traced(value) or is_traced(radius) or value <= limit * radius:
         return None
     said = (f"{name} {value:g} m is {value / radius:.3g} radii ({radius_name} {radius:g} m); "
             f"the {indenter} indenter models at most {limit:g} R")

@@ -104,8 +104,10 @@ class Result:
 
     @property
     def ok(self) -> bool:
-        """Whether the run is sound: ``finished`` and ``film_positive``."""
-        return self.finished and self.film_positive
+        """Whether the run is sound: ``finished`` and ``film_positive`` (under ``jit`` or
+        ``vmap``, a traced boolean like them)."""
+        both = self.finished & self.film_positive
+        return both if is_traced(both) else bool(both)
 
     def at(self, times, field: str = "force") -> np.ndarray:
         """A per-step series at any times, by the stepper's interpolant.

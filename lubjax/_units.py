@@ -5,13 +5,22 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import jax.numpy as jnp
+
 from ._checks import (
     INDENTERS,
     check_choice,
     check_poisson,
     check_quantity,
+    is_traced,
     travel_over_radius_problem,
 )
+
+
+def _sqrt(x):
+    """√x: ``math.sqrt`` for a number, ``jnp.sqrt`` for a traced value (a derivative in an SI
+    quantity is being taken), so the numbers stay those of ``math``."""
+    return jnp.sqrt(x) if is_traced(x) else math.sqrt(x)
 
 
 def _check_fields(obj, fields) -> None:
@@ -43,10 +52,10 @@ def si_scales(E_star, radius, d_c, *, t_c=None, speed=None, viscosity=None) -> d
         raise ValueError("si_scales needs exactly one of t_c and speed")
     out = {
         "time_s": d_c / speed if t_c is None else t_c,
-        "length_m": math.sqrt(radius * d_c),
+        "length_m": _sqrt(radius * d_c),
         "gap_m": d_c,
-        "pressure_Pa": 2 * E_star / math.pi * math.sqrt(d_c / radius),
-        "force_N": 2 * E_star * d_c**1.5 * math.sqrt(radius) / math.pi,
+        "pressure_Pa": 2 * E_star / math.pi * _sqrt(d_c / radius),
+        "force_N": 2 * E_star * d_c**1.5 * _sqrt(radius) / math.pi,
     }
     if viscosity is not None:
         if speed is not None:
@@ -84,7 +93,7 @@ def spring_stiffness_bar(k, E_star, radius, d_c) -> float:
     Returns:
         K̄ = π k/(2E*√(R d_c)), dimensionless.
     """
-    return math.pi * k / (2 * E_star * math.sqrt(radius * d_c))
+    return math.pi * k / (2 * E_star * _sqrt(radius * d_c))
 
 
 def plane_strain_modulus(E: float, poisson_ratio: float) -> float:
@@ -284,7 +293,7 @@ def hertz_indentation(E_star: float, radius: float, load: float) -> float:
     Returns:
         δ = (3F/(4E*√R))^{2/3} [m].
     """
-    return (3 * load / (4 * E_star * math.sqrt(radius))) ** (2 / 3)
+    return (3 * load / (4 * E_star * _sqrt(radius))) ** (2 / 3)
 
 
 @dataclasses.dataclass(frozen=True)

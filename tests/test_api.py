@@ -56,6 +56,41 @@ def test_dimensionless_groups_of_the_paper_experiment():
     assert t2.force_scale * lubjax.hertz_force(t2.z0_bar) == pytest.approx(f_si, rel=1e-12)
 
 
+@pytest.mark.slow
+def test_si_gradient_through_the_scenes_matches_central_differences():
+    """The force of a RelaxationTest in newtons, differentiated in SI (E*, η, z0) through the
+X on a fixed mesh,
+    steps of 1e-4 of each value), within 1e-3 of each derivative; and the creep test's gap in
+    metres in E*. The scenes once refused a traced value ("must be a positive number")."""
+    settings = lubjax.Settings(dr=0.05, mesh_growth=1.2, length=50.0, rtol=1e-5,
+                               error_estimate=False)
+
+    def force_N(p):
+        test = lubjax.RelaxationTest(E_star=p[0], radius=5e-3, viscosity=p[1], speed=1e-5,
+                                     indent=1e-4, gap=p[2])
+        run = lubjax.relax(test.beta, test.z0_bar, 1.0, settings=settings, mesh=settings.mesh())
+        return run.at(0.5)[0] * test.force_scale
+
+    def gap_m(E):
+        test = lubjax.CreepTest(E_star=E, radius=5e-3, viscosity=100.0, load=0.1,
+                                ramp_time=1.0, gap=5e-5)
+        run = lubjax.relax(test.beta, test.z0_bar, 1.0, drive=test.drive(), settings=settings,
+                           mesh=settings.mesh())
+        return run.at(0.5, "gap")[0] * test.scales["gap_m"]
+
+    p = np.array([3e6, 100.0, 5e-5])
+    grad = np.asarray(jax.grad(force_N)(jnp.asarray(p)))
+    for k in range(3):
+        h = 1e-4 * p[k]
+        e = np.zeros(3)
+        e[k] = h
+        central = (float(force_N(p + e)) - float(force_N(p - e))) / (2 * h)
+        assert grad[k] == pytest.approx(central, rel=1e-3), k
+    h = 1e-4 * 3e6
+    central = (float(gap_m(3e6 + h)) - float(gap_m(3e6 - h))) / (2 * h)
+    assert float(jax.grad(gap_m)(3e6)) == pytest.approx(central, rel=1e-3)
+
+
 def test_two_spheres_reduce_by_eq_24():
     assert lubjax.reduced_radius(2e-3, 2e-3) == pytest.approx(1e-3)
     assert lubjax.contact_modulus(1e6, 0.5, 1e6, 0.5) == pytest.approx(1e6 / 0.75 / 2)
@@ -169,7 +204,8 @@ def test_relax_under_jit_and_vmap_is_the_run_alone():
 def test_grad_of_relax_under_jit_and_vmap_is_the_plain_grad():
     """``jax.grad`` of a force value of relax, read at a scalar time as outside a transformation,
     under ``jit`` and under ``vmap``: the gradient of the run alone on the same mesh (within
-    rounding; the traced path once read a scalar time as a 0-d array and failed)."""
+    rounding; the traced path once read a scalar time as a 0-d array and failed); and
+    ``Result.ok`` under ``vmap``."""
     settings = lubjax.Settings(dr=0.05, mesh_growth=1.2, length=50.0, rtol=1e-3,
                                error_estimate=False)
 
@@ -181,6 +217,9 @@ def test_grad_of_relax_under_jit_and_vmap_is_the_plain_grad():
     np.testing.assert_allclose(float(jax.jit(jax.grad(force))(0.5)), plain[0], rtol=1e-10)
     np.testing.assert_allclose(jax.vmap(jax.grad(force))(jnp.array([0.5, 0.6])), plain,
                                rtol=1e-10)
+    # and the run's verdict is a traced boolean there (it once applied Python's `and` to one)
+    ok = jax.vmap(lambda z: lubjax.relax(100.0, z, 0.5, settings=settings).ok)
+    assert np.asarray(ok(jnp.array([0.5, 0.6]))).tolist() == [True, True]
 
 
 def test_second_derivatives_are_refused_with_a_reason():
