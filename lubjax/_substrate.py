@@ -99,6 +99,8 @@ class Layer:
     Raises:
         ValueError: ``thickness`` not > 0, ``poisson`` out of range or an unknown
             ``interface``.
+        NotImplementedError: ``thickness`` or ``poisson`` traced (a derivative in them, or
+            ``vmap`` over them): the influence matrix is built outside JAX.
     """
 
     thickness: float
@@ -106,6 +108,12 @@ class Layer:
     interface: str = "bonded"
 
     def __post_init__(self):
+        if is_traced(self.thickness) or is_traced(self.poisson):
+            raise NotImplementedError(
+                "Layer.thickness and Layer.poisson carry no derivative (and cannot be traced): "
+                "the layer's influence matrix is built once per mesh, outside JAX. "
+                "Differentiate in beta, z0, the drive's numbers or a Viscoelastic substrate's; "
+                "for a derivative in the thickness or Poisson's ratio take central differences.")
         thickness = check_positive("Layer.thickness", self.thickness)
         poisson = check_poisson("Layer.poisson", self.poisson)
         check_layer_base("Layer.interface", self.interface)

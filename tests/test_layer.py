@@ -3,6 +3,7 @@ the layer BVP solved numerically, real-space quadrature, the half-space and thin
 
 import math
 
+import jax
 import numpy as np
 import pytest
 from scipy.integrate import quad
@@ -222,6 +223,19 @@ def test_too_thin_a_layer_for_the_mesh_is_refused():
 def test_bad_layers_are_refused(kwargs):
     with pytest.raises(ValueError, match="Layer"):
         lubjax.Layer(**kwargs)
+
+
+def test_a_traced_layer_is_refused_with_a_reason():
+    """A derivative in the layer's thickness or Poisson's ratio (or a vmap over them) is not
+    available (the influence matrix is built outside JAX): said as such, where the range check
+    once reported a GradTracer as "not a finite number > 0". A layer passed through jit is
+    rebuilt from its static fields and still runs."""
+    for field in ("thickness", "poisson"):
+        with pytest.raises(NotImplementedError, match="Layer.thickness and Layer.poisson"):
+            jax.grad(lambda x, f=field: lubjax.Layer(**{"thickness": 10.0, f: x}).thickness)(
+                0.4 if field == "poisson" else 10.0)
+    layer = jax.jit(lambda s: s)(lubjax.Layer(10.0, 0.4))
+    assert (layer.thickness, layer.poisson, layer.interface) == (10.0, 0.4, "bonded")
 
 
 def test_layer_thickness_bar():
