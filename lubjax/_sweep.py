@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _compiler, _sharding
-from ._checks import check_parameter_arrays
+from ._checks import any_traced, check_parameter_arrays
 from ._controller import DONE
 from ._indenter import RampHold, SampledTravel
 from ._output import evaluate
@@ -157,6 +157,8 @@ def sweep(
     Raises:
         ValueError: no pairs, a β or z̄0 out of range, or an unknown ``batching`` (the message
             names the parameter).
+        TypeError: ``beta`` or ``z0`` traced (under ``jit``, ``vmap`` or a derivative: the
+            message names ``force_curve`` and ``relax``, which are).
 
     Example:
         A regime map over a grid: ``B, Z = np.meshgrid(betas, z0s); sweep(B, Z)``, then
@@ -174,6 +176,13 @@ def sweep(
         ```
     """
     _check_x64()
+    if any_traced((beta, z0)):
+        # (sweep compiles and times its own program on concrete pairs; the transformable
+        # batch is jax.vmap of force_curve or relax, which the guide shows)
+        raise TypeError(
+            "sweep takes concrete (beta, z0) arrays: it compiles, shards and times its own "
+            "program. Under jit, vmap or a derivative use jax.vmap(lambda b, z: "
+            "lubjax.force_curve(plan, b, z)) with lubjax.make_plan, or jax.vmap of lubjax.relax")
     b, z = np.broadcast_arrays(np.asarray(beta, np.float64), np.asarray(z0, np.float64))
     b, z = b.ravel(), z.ravel()
     if b.size == 0:
