@@ -57,11 +57,11 @@ def test_dimensionless_groups_of_the_paper_experiment():
 
 
 @pytest.mark.slow
-def test_si_gradient_through_the_scenes_matches_central_differences():
+def test_si_gradient_through_a_relaxation_test_matches_central_differences():
     """The force of a RelaxationTest in newtons, differentiated in SI (E*, η, z0) through the
-X on a fixed mesh,
-    steps of 1e-4 of each value), within 1e-3 of each derivative; and the creep test's gap in
-    metres in E*. The scenes once refused a traced value ("must be a positive number")."""
+    scene's scales and relax: central differences of the same runs (rtol 1e-5 on a fixed mesh,
+    steps of 1e-4 of each value), within 1e-3 of each derivative. The scenes once refused a
+    traced value ("must be a positive number")."""
     settings = lubjax.Settings(dr=0.05, mesh_growth=1.2, length=50.0, rtol=1e-5,
                                error_estimate=False)
 
@@ -71,13 +71,6 @@ X on a fixed mesh,
         run = lubjax.relax(test.beta, test.z0_bar, 1.0, settings=settings, mesh=settings.mesh())
         return run.at(0.5)[0] * test.force_scale
 
-    def gap_m(E):
-        test = lubjax.CreepTest(E_star=E, radius=5e-3, viscosity=100.0, load=0.1,
-                                ramp_time=1.0, gap=5e-5)
-        run = lubjax.relax(test.beta, test.z0_bar, 1.0, drive=test.drive(), settings=settings,
-                           mesh=settings.mesh())
-        return run.at(0.5, "gap")[0] * test.scales["gap_m"]
-
     p = np.array([3e6, 100.0, 5e-5])
     grad = np.asarray(jax.grad(force_N)(jnp.asarray(p)))
     for k in range(3):
@@ -86,9 +79,44 @@ X on a fixed mesh,
         e[k] = h
         central = (float(force_N(p + e)) - float(force_N(p - e))) / (2 * h)
         assert grad[k] == pytest.approx(central, rel=1e-3), k
-    h = 1e-4 * 3e6
-    central = (float(gap_m(3e6 + h)) - float(gap_m(3e6 - h))) / (2 * h)
-    assert float(jax.grad(gap_m)(3e6)) == pytest.approx(central, rel=1e-3)
+
+
+def test_the_scenes_numbers_differentiate_in_si():
+    """What each SI scene hands relax (β, z̄0, its drive's numbers, its scales), differentiated
+    in the SI inputs: central differences within 1e-6 as elasticities (smooth closed forms;
+    β and the scales are power laws in E*, R, η), the same numbers
+    as without a derivative (math.sqrt there, jnp.sqrt traced)."""
+    scenes = {
+        "relaxation": lambda x: lubjax.RelaxationTest(E_star=x[0], radius=x[1], viscosity=x[2],
+                                                      speed=1e-5, indent=1e-4, gap=5e-5),
+        "creep": lambda x: lubjax.CreepTest(E_star=x[0], radius=x[1], viscosity=x[2],
+                                            load=0.1, ramp_time=1.0, gap=5e-5),
+        "collision": lambda x: lubjax.Collision(E_star=x[0], radius=x[1], viscosity=x[2],
+                                                mass=1e-5, speed=1e-2, gap=1e-5),
+    }
+
+    def numbers(scene, x):
+        s = scenes[scene](x)
+        drive = s.drive() if scene != "relaxation" else None
+        extra = [] if drive is None else [leaf for leaf in jax.tree_util.tree_leaves(drive)]
+        names = ("beta", "z0_bar", "force_scale", "time_scale", "length_scale")
+        values = [getattr(s, n) for n in names if hasattr(s, n)] + extra
+        return jnp.stack([jnp.asarray(v, jnp.float64) for v in values])
+
+    x = np.array([3e6, 5e-3, 100.0])
+    for scene in scenes:
+        J = np.asarray(jax.jacfwd(lambda x, s=scene: numbers(s, x))(jnp.asarray(x)))
+        np.testing.assert_array_equal(np.asarray(numbers(scene, x)),
+                                      np.asarray(numbers(scene, jnp.asarray(x))))
+        size = np.where(np.asarray(numbers(scene, x)) != 0, np.abs(numbers(scene, x)), 1.0)
+        for k in range(3):
+            e = np.zeros(3)
+            e[k] = 1e-5 * x[k]
+            central = (np.asarray(numbers(scene, x + e)) - np.asarray(numbers(scene, x - e))) / (
+                2 * e[k])
+            # as elasticities, d ln(number)/d ln(input): every number on one scale
+            np.testing.assert_allclose(J[:, k] * x[k] / size, central * x[k] / size, atol=1e-6,
+                                       err_msg=f"{scene}, input {k}")
 
 
 def test_two_spheres_reduce_by_eq_24():
@@ -201,25 +229,23 @@ def test_relax_under_jit_and_vmap_is_the_run_alone():
         np.testing.assert_allclose(batched, single, rtol=1e-6)
 
 
-def test_grad_of_relax_under_jit_and_vmap_is_the_plain_grad():
-    """``jax.grad`` of a force value of relax, read at a scalar time as outside a transformation,
-    under ``jit`` and under ``vmap``: the gradient of the run alone on the same mesh (within
-    rounding; the traced path once read a scalar time as a 0-d array and failed); and
-    ``Result.ok`` under ``vmap``."""
+def test_grad_of_relax_under_jit_is_the_plain_grad():
+    """``jax.grad`` of a force value of relax read at a scalar time, as outside a
+    transformation, under ``jit``: the gradient of the run alone on the same mesh (within
+    rounding; the traced path, which ``vmap`` takes too, once read a scalar time as a 0-d array
+    and failed), and its ``Result.ok`` a traced boolean there (it once applied Python's
+    ``and`` to one)."""
     settings = lubjax.Settings(dr=0.05, mesh_growth=1.2, length=50.0, rtol=1e-3,
                                error_estimate=False)
 
-    def force(z):
-        return lubjax.relax(100.0, z, 0.5, settings=settings, mesh=settings.mesh()).at(0.5)[0]
+    def force_and_ok(z):
+        run = lubjax.relax(100.0, z, 0.5, settings=settings, mesh=settings.mesh())
+        return run.at(0.5)[0], run.ok
 
-    plain = [float(jax.grad(force)(z)) for z in (0.5, 0.6)]
-    assert np.all(np.isfinite(plain)) and plain[0] != plain[1]
-    np.testing.assert_allclose(float(jax.jit(jax.grad(force))(0.5)), plain[0], rtol=1e-10)
-    np.testing.assert_allclose(jax.vmap(jax.grad(force))(jnp.array([0.5, 0.6])), plain,
-                               rtol=1e-10)
-    # and the run's verdict is a traced boolean there (it once applied Python's `and` to one)
-    ok = jax.vmap(lambda z: lubjax.relax(100.0, z, 0.5, settings=settings).ok)
-    assert np.asarray(ok(jnp.array([0.5, 0.6]))).tolist() == [True, True]
+    plain = float(jax.grad(lambda z: force_and_ok(z)[0])(0.5))
+    (_, ok), jitted = jax.jit(jax.value_and_grad(force_and_ok, has_aux=True))(0.5)
+    assert math.isfinite(plain) and plain != 0.0 and bool(ok)
+    np.testing.assert_allclose(float(jitted), plain, rtol=1e-10)
 
 
 def test_second_derivatives_are_refused_with_a_reason():
