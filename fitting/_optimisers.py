@@ -133,6 +133,12 @@ class LMState:
         """Problem k's residual variance s² = 2S/(n - p)."""
         return 2 * self.cost[k] / max(self.n_samples[k] - self.xs[k].size, 1)
 
+    def decrement(self, k) -> float:
+        """Problem k's Gauss–Newton decrement at its current point, in the parameters still
+        fitted (:func:`decrement`)."""
+        r, J, _ = self.current[k]
+        return decrement(r, self.fitted(k, J), self.s2(k))
+
 
 def lm_init(evaluate: Evaluator, x0s, n_samples, floors=None) -> LMState:
     """The state at the starts x0s (one model run); a problem whose run fails there is done.
@@ -164,7 +170,7 @@ def lm_terminate(state: LMState, tol) -> LMState:
         for j in state.floors[k]:
             if j not in state.held[k] and at_floor(r, J, state.s2(k), j):
                 state.held[k].append(j)
-        if decrement(r, state.fitted(k, J), state.s2(k)) < tol:
+        if state.decrement(k) < tol:
             state.done[k], state.converged[k] = True, True
             state.messages[k] = _converged(state, k, CONVERGED)
     return state
@@ -247,11 +253,10 @@ def capped_step(M, g, caps_of) -> np.ndarray:
     return x
 
 
-def _at_model_accuracy(state: LMState, k, most, why) -> bool:
+def _at_model_accuracy(state: LMState, k, dec, most, why) -> bool:
     """Whether problem k, ending for ``why`` (its cost rough on the scale of its steps), has its
-    Gauss–Newton decrement below ``most``; if so it is done, converged at the model's
+    Gauss–Newton decrement ``dec`` below ``most``; if so it is done, converged at the model's
     accuracy."""
-    dec = decrement(state.current[k][0], state.fitted(k, state.current[k][1]), state.s2(k))
     if dec >= most:
         return False
     state.done[k], state.converged[k] = True, True
@@ -283,8 +288,8 @@ def lm_step(evaluate: Evaluator, state: LMState, it: int) -> LMState:
         accept = cost_try < cost[k]
         small = (not accept) or (cost[k] - cost_try < STALL_RTOL * cost[k])
         state.stalled[k] = state.stalled[k] + 1 if small else 0
-        if state.stalled[k] >= 2 and _at_model_accuracy(state, k, STALL_DECREMENT,
-                                                         "cost stalled"):
+        if state.stalled[k] >= 2 and _at_model_accuracy(state, k, state.decrement(k),
+                                                         STALL_DECREMENT, "cost stalled"):
             continue
         if accept:
             Jd = state.fitted(k, cur[k][1]) @ (trial[k] - xs[k])[state.free(k)]
@@ -293,16 +298,16 @@ def lm_step(evaluate: Evaluator, state: LMState, it: int) -> LMState:
             xs[k], cur[k], cost[k] = trial[k], new[k], cost_try
             lam[k] = max(lam[k] / 3.0, 1e-9)
             if state.creeping[k] >= 2:
-                _at_model_accuracy(state, k, NOISE_DECREMENT,
+                _at_model_accuracy(state, k, state.decrement(k), NOISE_DECREMENT,
                                    f"steps under {CREEP_STEP:g} standard errors")
         else:
             lam[k] *= 4.0
-            if lam[k] > 1e12 and not _at_model_accuracy(state, k, NOISE_DECREMENT,
-                                                         "no decreasing step"):
-                done[k] = True
-                dec = decrement(cur[k][0], state.fitted(k, cur[k][1]), state.s2(k))
-                state.messages[k] = (f"stopped: no decreasing step (lambda > 1e12) with "
-                                     f"the Gauss-Newton decrement at {dec:.2g}")
+            if lam[k] > 1e12:
+                dec = state.decrement(k)
+                if not _at_model_accuracy(state, k, dec, NOISE_DECREMENT, "no decreasing step"):
+                    done[k] = True
+                    state.messages[k] = (f"stopped: no decreasing step (lambda > 1e12) with "
+                                         f"the Gauss-Newton decrement at {dec:.2g}")
     return state
 
 
@@ -315,8 +320,7 @@ def lm_outcomes(state: LMState, tol, max_iter) -> list[Outcome]:
         conv, msg = bool(state.converged[k]), state.messages[k]
         if not state.done[k]:
             msg = f"not converged after {max_iter} iterations"
-        if not conv and np.isfinite(r).all() and decrement(r, state.fitted(k, J),
-                                                           state.s2(k)) < tol:
+        if not conv and np.isfinite(r).all() and state.decrement(k) < tol:
             conv, msg = True, _converged(state, k, CONVERGED)
         out.append(Outcome(state.xs[k], r, J, int(state.iterations[k]), conv, msg))
     return out
