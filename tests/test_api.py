@@ -60,8 +60,7 @@ def test_dimensionless_groups_of_the_paper_experiment():
 def test_si_gradient_through_a_relaxation_test_matches_central_differences():
     """The force of a RelaxationTest in newtons, differentiated in SI (E*, η, z0) through the
     scene's scales and relax: central differences of the same runs (rtol 1e-5 on a fixed mesh,
-    steps of 1e-4 of each value), within 1e-3 of each derivative. The scenes once refused a
-    traced value ("must be a positive number")."""
+    steps of 1e-4 of each value), within 1e-3 of each derivative."""
     settings = lubjax.Settings(dr=0.05, mesh_growth=1.2, length=50.0, rtol=1e-5,
                                error_estimate=False)
 
@@ -97,18 +96,18 @@ def test_the_scenes_numbers_differentiate_in_si():
 
     def numbers(scene, x):
         s = scenes[scene](x)
-        drive = s.drive() if scene != "relaxation" else None
-        extra = [] if drive is None else [leaf for leaf in jax.tree_util.tree_leaves(drive)]
         names = ("beta", "z0_bar", "force_scale", "time_scale", "length_scale")
-        values = [getattr(s, n) for n in names if hasattr(s, n)] + extra
+        values = [getattr(s, n) for n in names if hasattr(s, n)]
+        if hasattr(s, "drive"):
+            values += jax.tree_util.tree_leaves(s.drive())
         return jnp.stack([jnp.asarray(v, jnp.float64) for v in values])
 
     x = np.array([3e6, 5e-3, 100.0])
     for scene in scenes:
         J = np.asarray(jax.jacfwd(lambda x, s=scene: numbers(s, x))(jnp.asarray(x)))
-        np.testing.assert_array_equal(np.asarray(numbers(scene, x)),
-                                      np.asarray(numbers(scene, jnp.asarray(x))))
-        size = np.where(np.asarray(numbers(scene, x)) != 0, np.abs(numbers(scene, x)), 1.0)
+        values = np.asarray(numbers(scene, x))
+        np.testing.assert_array_equal(values, np.asarray(numbers(scene, jnp.asarray(x))))
+        size = np.where(values != 0, np.abs(values), 1.0)
         for k in range(3):
             e = np.zeros(3)
             e[k] = 1e-5 * x[k]
@@ -231,10 +230,9 @@ def test_relax_under_jit_and_vmap_is_the_run_alone():
 
 def test_grad_of_relax_under_jit_is_the_plain_grad():
     """``jax.grad`` of a force value of relax read at a scalar time, as outside a
-    transformation, under ``jit``: the gradient of the run alone on the same mesh (within
-    rounding; the traced path, which ``vmap`` takes too, once read a scalar time as a 0-d array
-    and failed), and its ``Result.ok`` a traced boolean there (it once applied Python's
-    ``and`` to one)."""
+    transformation, under ``jit`` (the traced path, which ``vmap`` takes too): the gradient of
+    the run alone on the same mesh, within rounding, and its ``Result.ok`` a traced boolean
+    there."""
     settings = lubjax.Settings(dr=0.05, mesh_growth=1.2, length=50.0, rtol=1e-3,
                                error_estimate=False)
 
@@ -250,8 +248,7 @@ def test_grad_of_relax_under_jit_is_the_plain_grad():
 
 def test_second_derivatives_are_refused_with_a_reason():
     """A derivative of a run's derivative is not implemented (its replay is not differentiated
-    again): every way to ask for one says so, where JAX alone failed an assertion or could not
-    linearize a loop."""
+    again): every way to ask for one says so, with a NotImplementedError that names it."""
     settings = lubjax.Settings(dr=0.05, mesh_growth=1.2, length=50.0, rtol=1e-3,
                                error_estimate=False)
 

@@ -227,9 +227,8 @@ def test_bad_layers_are_refused(kwargs):
 
 def test_a_traced_layer_is_refused_with_a_reason():
     """A derivative in the layer's thickness or Poisson's ratio (or a vmap over them) is not
-    available (the influence matrix is built outside JAX): said as such, where the range check
-    once reported a GradTracer as "not a finite number > 0". A layer passed through jit is
-    rebuilt from its static fields and still runs."""
+    available (the influence matrix is built outside JAX): said as such, not as a value out of
+    range. A layer passed through jit is rebuilt from its static fields and still runs."""
     for field in ("thickness", "poisson"):
         with pytest.raises(NotImplementedError, match="Layer.thickness and Layer.poisson"):
             jax.grad(lambda x, f=field: lubjax.Layer(**{"thickness": 10.0, f: x}).thickness)(

@@ -42,8 +42,7 @@ def test_sweep_rejects_bad_values():
         lubjax.sweep([1.0], 0.5, devices=99)
     with pytest.raises(ValueError, match="batching must be one of"):
         lubjax.sweep([1.0], 0.5, batching="pmap")
-    # traced pairs (a derivative, jit, vmap): the transformable batch is named, where numpy
-    # once reported a TracerArrayConversionError
+    # traced pairs (a derivative, jit, vmap): the message names the transformable batch
     for transform in (jax.grad, jax.jit):
         with pytest.raises(TypeError, match="force_curve"):
             transform(lambda b: lubjax.sweep(b, 0.5).force.sum())(100.0)
