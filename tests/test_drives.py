@@ -161,10 +161,10 @@ def test_restitution_rises_with_stokes_number():
 )
 def test_relax_differentiates_the_drive_it_is_given(drive):
     """jax.jvp of relax itself with ``drive=`` (in z̄0 and the drive's first number): its values
-    are the plain run's and its tangent is the stepper's on relax's differentiated mesh, whose
-    drive derivatives test_drive_gradients_reverse_forward_and_differences checks against
-    central differences: the differentiated run is the given drive's, not the default
-    ramp-and-hold."""
+    are the plain run's and its tangent agrees with central differences of plain runs of that
+    drive (step 10⁻², within 3·10⁻³ of their largest; seen 3·10⁻⁵ to 5·10⁻⁴, where the
+    default ramp-and-hold's tangent is 0.25 to 1.7 off): the differentiated run is the given
+    drive's, not the default ramp-and-hold."""
     times = jnp.array([0.5, 1.0, 2.0])
     leaves, treedef = jax.tree_util.tree_flatten(drive)
 
@@ -172,22 +172,16 @@ def test_relax_differentiates_the_drive_it_is_given(drive):
         d = jax.tree_util.tree_unflatten(treedef, [p[1], *leaves[1:]])
         return lubjax.relax(50.0, p[0], 2.0, drive=d, settings=FAST).at(times, "gap")
 
-    p0 = jnp.array([0.8, float(leaves[0])])
+    p0, direction = jnp.array([0.8, float(leaves[0])]), jnp.array([0.3, 1.0])
     plain = lubjax.relax(50.0, 0.8, 2.0, drive=drive, settings=FAST).at(times, "gap")
-    values, tangent = jax.jvp(gaps, (p0,), (jnp.array([0.3, 1.0]),))
+    values, tangent = jax.jvp(gaps, (p0,), (direction,))
     np.testing.assert_allclose(values, plain, rtol=1e-12, atol=1e-15)
 
-    mesh = lubjax.mesh_for(FAST, drive=drive, beta=50.0, z0=0.8, t_end=2.0, derivatives=True)
-    disc = lubjax.stepper.discretise(mesh)
-
-    def stepper_gaps(p):
-        d = jax.tree_util.tree_unflatten(treedef, [p[1], *leaves[1:]])
-        traj = lubjax.stepper.rollout(disc, 50.0, p[0], d, 2.0, FAST.tolerance())
-        return lubjax.stepper.evaluate(traj.steps, times, "gap")
-
-    _, expected = jax.jvp(stepper_gaps, (p0,), (jnp.array([0.3, 1.0]),))
+    h = 1e-2
+    central = (np.asarray(gaps(p0 + h * direction)) - np.asarray(gaps(p0 - h * direction)))
+    central /= 2 * h
     assert np.all(np.isfinite(tangent)) and np.max(np.abs(tangent)) > 0
-    np.testing.assert_allclose(tangent, expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(tangent, central, rtol=0, atol=3e-3 * np.max(np.abs(central)))
 
 
 @pytest.mark.parametrize(
