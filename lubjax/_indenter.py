@@ -12,7 +12,7 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_finite_array, check_increasing
+from ._checks import check_finite_array, check_increasing, concrete, is_traced
 from ._pytree import register
 
 
@@ -82,16 +82,22 @@ class SampledTravel:
     PCHIP: C¹, no overshoot; docs/design.md, "Numerical hygiene"); held constant before the
     first and after the last sample.
 
+    The travel samples may be traced (a derivative of a run with respect to the record, e.g.
+    a calibration factor of the piezo); the sample times may not.
+
     Attributes:
         t: sample times t̄ (units of t_c), strictly increasing, at least 2.
         travel_samples: d̄, the travel toward the substrate at those times (units of d_c), as
             many as ``t``.
         breakpoints: times t̄ where the velocity jumps (default: the detected start and end of
-            the motion).
+            the motion; found from the samples' values, so to be given where those are traced
+            under ``jit`` or ``vmap``).
 
     Raises:
         ValueError: ``t`` and ``travel_samples`` not finite 1-D arrays of one length ≥ 2,
-            ``t`` not strictly increasing, or ``breakpoints`` not finite.
+            ``t`` not strictly increasing, ``breakpoints`` not finite, or not given for
+            samples whose values are unknown (under ``jit`` or ``vmap``).
+        NotImplementedError: traced sample times.
     """
 
     t: np.ndarray
@@ -99,20 +105,32 @@ class SampledTravel:
     breakpoints: tuple[float, ...] = ()
 
     def __post_init__(self):
+        if is_traced(self.t):
+            raise NotImplementedError(
+                "SampledTravel: the sample times t cannot be traced (a run has no derivative in "
+                "the times of its record); its travel samples can")
         t = np.asarray(self.t, dtype=np.float64)
-        d = np.asarray(self.travel_samples, dtype=np.float64)
+        traced = is_traced(self.travel_samples)
+        xp = jnp if traced else np
+        d = xp.asarray(self.travel_samples, dtype=np.float64)
         if t.ndim != 1 or t.shape != d.shape or t.size < 2:
             raise ValueError("t and travel must be 1-D arrays of the same length >= 2")
-        for a in (t, d):
-            check_finite_array("t and travel", a, shown=None)
+        known = concrete(d)  # the samples' values (None under jit or vmap)
+        for a in (t, known):
+            if a is not None:
+                check_finite_array("t and travel", a, shown=None)
         check_increasing("t", t)
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "travel_samples", d)
-        object.__setattr__(self, "slopes", _monotone_slopes(t, d))
+        object.__setattr__(self, "slopes", _monotone_slopes(t, d, xp))
         # A leaf, not static, so stacked histories of both kinds still vmap together.
-        object.__setattr__(self, "monotone", np.bool_(np.all(np.diff(d) >= 0)))
+        object.__setattr__(self, "monotone", xp.bool_(xp.all(xp.diff(d) >= 0)))
         if not len(self.breakpoints):
-            object.__setattr__(self, "breakpoints", _motion_breakpoints(t, d))
+            if known is None:
+                raise ValueError(
+                    "SampledTravel: give breakpoints= where the travel samples are traced under "
+                    "jit or vmap (by default they are found from the samples' values)")
+            object.__setattr__(self, "breakpoints", _motion_breakpoints(t, known))
         bp = check_finite_array("breakpoints", np.ravel(self.breakpoints),
                                 shown=self.breakpoints)
         object.__setattr__(self, "breakpoints", tuple(float(b) for b in bp))
@@ -152,33 +170,31 @@ class SampledTravel:
         return h00 * d[i] + h10 * h * m[i] + h01 * d[i + 1] + h11 * h * m[i + 1]
 
 
-def _monotone_slopes(t: np.ndarray, d: np.ndarray) -> np.ndarray:
+def _monotone_slopes(t: np.ndarray, d, xp=np):
     """Fritsch–Carlson slopes (as scipy's PchipInterpolator): zero at local extrema, the
-    weighted harmonic mean of the neighbouring secants elsewhere, one-sided at the ends."""
+    weighted harmonic mean of the neighbouring secants elsewhere, one-sided at the ends.
+    ``xp``: ``numpy``, or ``jax.numpy`` for traced samples (the same arithmetic; the secants
+    a zero slope does not use are replaced before they divide, so no NaN reaches a
+    derivative)."""
     h = np.diff(t)
-    delta = np.diff(d) / h
-    m = np.zeros_like(d)
-    if d.size == 2:
-        m[:] = delta[0]
-        return m
+    delta = xp.diff(d) / h
+    if d.shape[0] == 2:
+        return xp.full(2, delta[0])
     w1 = 2 * h[1:] + h[:-1]
     w2 = h[1:] + 2 * h[:-1]
     same = (delta[:-1] * delta[1:]) > 0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        harmonic = (w1 + w2) / (w1 / delta[:-1] + w2 / delta[1:])
-    m[1:-1] = np.where(same, harmonic, 0.0)
+    before, after = xp.where(same, delta[:-1], 1.0), xp.where(same, delta[1:], 1.0)
+    inner = xp.where(same, (w1 + w2) / (w1 / before + w2 / after), 0.0)
 
     def end(h0, h1, d0, d1):
         slope = ((2 * h0 + h1) * d0 - h0 * d1) / (h0 + h1)
-        if np.sign(slope) != np.sign(d0):
-            return 0.0
-        if np.sign(d0) != np.sign(d1) and abs(slope) > abs(3 * d0):
-            return 3 * d0
-        return slope
+        slope = xp.where(xp.sign(slope) != xp.sign(d0), 0.0, slope)
+        return xp.where((xp.sign(d0) != xp.sign(d1)) & (xp.abs(slope) > xp.abs(3 * d0)),
+                        3 * d0, slope)
 
-    m[0] = end(h[0], h[1], delta[0], delta[1])
-    m[-1] = end(h[-1], h[-2], delta[-1], delta[-2])
-    return m
+    first = end(h[0], h[1], delta[0], delta[1])
+    last = end(h[-1], h[-2], delta[-1], delta[-2])
+    return xp.concatenate([xp.reshape(first, (1,)), inner, xp.reshape(last, (1,))])
 
 
 def _motion_breakpoints(t: np.ndarray, d: np.ndarray) -> tuple[float, ...]:

@@ -194,6 +194,47 @@ def test_sampled_history_is_the_monotone_cubic():
     np.testing.assert_allclose(hist.travel([t[0] - 1, t[-1] + 1]), [d[0], d[-1]], atol=0)
 
 
+def test_sampled_history_takes_traced_samples():
+    """A SampledTravel built from traced travel samples has the slopes of the concrete one
+    (the monotone cubic's, in jax.numpy: the same to rounding, and no NaN in the derivative
+    where a secant is flat); under jit it needs its breakpoints given (they are found from
+    the samples' values), and traced sample times are refused with a reason."""
+    t = np.linspace(0.0, 2.0, 21)
+    shape = np.minimum(t, 1.0)  # flat secants after t = 1: slopes 0 there
+    plain = lubjax.SampledTravel(t, shape)
+    slopes, dslopes = jax.jvp(lambda s: lubjax.SampledTravel(t, s * shape).slopes, (2.0,),
+                              (1.0,))
+    np.testing.assert_allclose(slopes, 2.0 * plain.slopes, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(dslopes, plain.slopes, rtol=1e-14, atol=0)
+    given = jax.jit(lambda s: lubjax.SampledTravel(t, s * shape, breakpoints=(0.0, 1.0)).slopes)
+    np.testing.assert_allclose(given(2.0), 2.0 * plain.slopes, rtol=1e-14, atol=0)
+    with pytest.raises(ValueError, match="give breakpoints= where the travel samples are traced"):
+        jax.jit(lambda s: lubjax.SampledTravel(t, s * shape).slopes)(2.0)
+    with pytest.raises(NotImplementedError, match="sample times t cannot be traced"):
+        jax.grad(lambda c: lubjax.SampledTravel(c * t, shape).slopes[1])(1.0)
+
+
+@pytest.mark.slow
+def test_relax_differentiates_a_sampled_history_in_its_samples():
+    """d F̄/d s of a measured ramp-and-hold scaled by s (a piezo's calibration), by jax.jvp of
+    relax itself, against central differences of plain runs (step 10⁻², within 3·10⁻³ of
+    their largest; seen 1.1·10⁻⁴), its values the plain run's."""
+    t = np.linspace(0.0, 2.0, 401)
+    shape = np.minimum(t, 1.0)
+    times = jnp.array([0.5, 0.9, 1.5, 2.0])  # not on the breakpoint t̄ = 1
+    settings = lubjax.Settings(dr=0.03, error_estimate=False, contact_radius=None)
+
+    def force(s):
+        return lubjax.relax(50.0, 0.8, 2.0, history=lubjax.SampledTravel(t, s * shape),
+                            settings=settings).at(times)
+
+    values, tangent = jax.jvp(force, (1.0,), (1.0,))
+    np.testing.assert_allclose(values, force(1.0), rtol=1e-11, atol=0)
+    h = 1e-2
+    central = (np.asarray(force(1.0 + h)) - np.asarray(force(1.0 - h))) / (2 * h)
+    np.testing.assert_allclose(tangent, central, rtol=0, atol=3e-3 * np.max(np.abs(central)))
+
+
 @pytest.mark.slow
 def test_smoothed_start_eq_23():
     ramp = lubjax.RampHold(t_accel=0.1)
