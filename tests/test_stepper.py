@@ -38,6 +38,7 @@ def test_adjoint_at_block_ends_past_the_run_and_batched():
     block's or the run's end (lubjax/_adjoint.py): grad in (β, z̄0) equals the forward replay's
     to 1e-9 for runs that stop inside a sub-block, on a block's last step and with the budget
     spent, alone and under vmap (where every sub-block runs, masked)."""
+    from lubjax import _sharding
     from lubjax._adjoint import sub_blocks
     from lubjax._loop import block_size
 
@@ -74,8 +75,14 @@ def test_adjoint_at_block_ends_past_the_run_and_batched():
         g, f = np.asarray(grad(x, t_end)), np.asarray(forward(x, t_end))
         assert np.all(np.isfinite(g)) and np.all(g != 0.0), case
         np.testing.assert_allclose(g, f, rtol=1e-9, err_msg=case)
+    # Batched as an accelerator batches (a CPU maps a batch, each member alone): one vmapped
+    # loop, in which the members' runs end at different steps and every sub-block runs.
     batch = jnp.array([ends["sub-block"], ends["block"], ends["budget"]])
-    g_batch = np.asarray(jax.jit(jax.vmap(jax.grad(loss), (None, 0)))(x, batch))
+    asked = _sharding._ASKED.set("vmap")
+    try:
+        g_batch = np.asarray(jax.jit(jax.vmap(jax.grad(loss), (None, 0)))(x, batch))
+    finally:
+        _sharding._ASKED.reset(asked)
     np.testing.assert_allclose(g_batch, [np.asarray(forward(x, t)) for t in batch], rtol=1e-9)
 
 
