@@ -309,6 +309,12 @@ def test_second_derivatives_are_refused_with_a_reason():
 
 @pytest.mark.slow
 def test_vmap_and_forward_gradient_in_beta_and_z0():
+    """vmap of a jitted force_curve is each run alone (mapped on a CPU), and jax.jacfwd in
+    (β, z̄0) agrees with central differences of the adaptive solution: the derivative of the
+    discrete solution on its own steps (step sizes are not differentiated). The adaptive force
+    is smooth in (β, z̄0) only up to its step choices (jumps of order the local error), so ε is
+    sized to that noise, not to eps: ε = 1e-3·|x| at rtol = 1e-9 (truncation ε² ~ 1e-6); what
+    the frozen steps leave out is O(rtol^{2/3}) and the first, unchecked step's error."""
     settings = lubjax.Settings(dr=0.05, mesh_growth=1.1, length=50.0, rtol=1e-9,
                                max_steps=100_000, error_estimate=False)
     plan = lubjax.make_plan(1.5, settings=settings, times=np.linspace(0, 1.5, 31))
@@ -327,8 +333,6 @@ def test_vmap_and_forward_gradient_in_beta_and_z0():
     jac = jax.jit(jax.jacfwd(lambda p: f(p[0], p[1])))
     x = jnp.array([100.0, 0.8])
     J = np.asarray(jac(x))
-    # Central differences of the adaptive solution: ε sized to its step-choice noise, not to
-    # eps (see tests/test_stepper.py::test_gradient_against_central_differences).
     for k in range(2):
         h = 1e-3 * abs(float(x[k]))
         e = np.zeros(2)
