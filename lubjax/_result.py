@@ -209,11 +209,10 @@ def result_of(trajs, disc, beta, z0, t_end, ptimes, max_steps, compile_s, run_s)
     traj = trajs[0]
     primal = concrete(traj)
     keep = np.flatnonzero(np.asarray(primal.steps.accepted))
-    series = {k: getattr(traj.steps, k)[keep] for k in SERIES}
     values = {k: np.asarray(getattr(primal.steps, k))[keep] for k in SERIES}
     traced = any_traced(traj)
-    if not traced:
-        series = values
+    # (indexing a jax array by a new number of steps compiles a gather: only where traced)
+    series = {k: getattr(traj.steps, k)[keep] for k in SERIES} if traced else values
     errors = errors_of(values, trajs)
     status = int(primal.status)
     reached = (np.asarray(ptimes) <= float(np.max(values["t"]))) | (status == DONE)
