@@ -12,6 +12,10 @@ round-robin). Columns: import time, ``Result.compile_s`` of the first call, the 
 wall time, the median ``run_s`` of five further calls, and the accepted steps. Writes
 benchmarks/out/first_call.md; ``--t-end`` runs ``relax(100, 0.5, t_end)`` instead (a long hold:
 the steps the neck's thinning costs) and writes benchmarks/out/first_call_t<t_end>.md.
+``--family`` times a family instead: ``relax(β, z̄0, 5)`` at defaults for β = 10⁻¹…10⁹ (one per
+decade) and z̄0 = 0.1, 0.5, 2 in one fresh process, as a user's loop over β would call it; columns:
+the runs, their distinct mesh sizes, the calls that compiled, the compile and run seconds summed,
+and the loop's wall time. It writes benchmarks/out/first_call_family.md.
 ``--no-estimate`` passes ``Settings(error_estimate=False)`` to revisions that have that setting
 (the hand-tuned grid has no estimate to switch off): the stepper's own program against the grid's,
 without the estimate's coarse-mesh program; it writes benchmarks/out/first_call_noestimate.md.
@@ -46,6 +50,18 @@ print(json.dumps(dict(import_s=imported - start, compile_s=first.compile_s,
                       steps=int(getattr(first, "accepted", -1)))))
 """
 
+FAMILY_CHILD = r"""
+import json, sys, time
+import lubjax
+start = time.perf_counter()
+runs = [lubjax.relax(10.0 ** k, z0, 5.0) for z0 in (0.1, 0.5, 2.0) for k in range(-1, 10)]
+wall = time.perf_counter() - start
+print(json.dumps(dict(runs=len(runs), sizes=len({r.r.size for r in runs}),
+                      compiled=sum(r.compile_s > 0 for r in runs),
+                      compile_s=sum(r.compile_s for r in runs),
+                      run_s=sum(r.run_s for r in runs), wall_s=wall)))
+"""
+
 
 def main(argv=None):
     from benchmarks._harness import label, median_range, write_report
@@ -56,7 +72,11 @@ def main(argv=None):
     ap.add_argument("--t-end", type=float, default=5.0)
     ap.add_argument("--no-estimate", action="store_true",
                     help="Settings(error_estimate=False) where the revision has it")
+    ap.add_argument("--family", action="store_true",
+                    help="a loop of relax over beta and z0 instead of one call")
     args = _harness.parse(ap, argv)
+    child = [FAMILY_CHILD] if args.family else [CHILD, repr(args.t_end),
+                                                 "1" if args.no_estimate else "0"]
     results = {rev: [] for rev in args.revisions}
     with tempfile.TemporaryDirectory() as tmp:
         trees = {}
@@ -68,8 +88,7 @@ def main(argv=None):
         try:
             for i in range(args.repeat):
                 for rev, tree in trees.items():
-                    proc = subprocess.run([sys.executable, "-c", CHILD, repr(args.t_end),
-                                           "1" if args.no_estimate else "0"], cwd=tree,
+                    proc = subprocess.run([sys.executable, "-c", *child], cwd=tree,
                                           env=dict(os.environ, PYTHONPATH=tree),
                                           capture_output=True, text=True, check=True)
                     results[rev].append(json.loads(proc.stdout.strip().splitlines()[-1]))
@@ -78,6 +97,8 @@ def main(argv=None):
             for tree in trees.values():
                 subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", tree],
                                check=False)
+    if args.family:
+        return _family_report(args, results)
     keys = ("import_s", "compile_s", "first_call_s", "run_s")
     default = args.t_end == 5.0
     command = f"python -m benchmarks.first_call {' '.join(args.revisions)} --repeat {args.repeat}"
@@ -103,6 +124,29 @@ def main(argv=None):
     name = "first_call" + ("" if default else f"_t{args.t_end:g}")
     name += "_noestimate.md" if args.no_estimate else ".md"
     write_report(os.path.join(OUT, name), lines)
+
+
+def _family_report(args, results):
+    from benchmarks._harness import label, median_range, write_report
+
+    command = (f"python -m benchmarks.first_call {' '.join(args.revisions)} "
+               f"--repeat {args.repeat} --family")
+    lines = [
+        f"# A loop of relax(beta, z0, 5) over a family, by revision ({label()})",
+        "",
+        f"`{command}`: beta = 1e-1..1e9 (one per decade) × z0 = 0.1, 0.5, 2 at each revision's "
+        "defaults, in one fresh process; fresh processes alternate between revisions; median "
+        "(min–max) in seconds.",
+        "",
+        "| revision | runs | mesh sizes | calls that compiled | compile_s | run_s | loop wall |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for rev, rows in results.items():
+        first = rows[0]
+        cells = [str(first[k]) for k in ("runs", "sizes", "compiled")]
+        cells += [median_range(r[k] for r in rows) for k in ("compile_s", "run_s", "wall_s")]
+        lines.append(f"| {rev} | " + " | ".join(cells) + " |")
+    write_report(os.path.join(OUT, "first_call_family.md"), lines)
 
 
 if __name__ == "__main__":

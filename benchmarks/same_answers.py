@@ -10,7 +10,9 @@ drive (travel, sampled travel with a smooth start, load, spring, free sphere) an
 (half-space, bonded layer, viscoelastic) at orders 1, 2 and 3, the error estimate's runs, the
 reverse mode (``force_curve`` and its gradient) and a ``vmap`` batch. For each scene: the accepted
 and rejected steps of both revisions, whether every array is bitwise identical, and otherwise the
-largest difference relative to the array's largest value; and the bytes of the loop's state,
+largest difference relative to the array's largest value (where B's mesh holds A's nodes and
+more, a padded mesh, the profiles on A's nodes); the force read at 201 fixed times through each
+run's interpolant, an answer apart from the steps taken; and the bytes of the loop's state,
 what reverse mode stores per attempt. Exits 1 if any scene differs in its step counts or by more
 than ``--limit`` (default 1e-12), or if B's state is larger. Writes
 benchmarks/out/same_answers.md.
@@ -44,6 +46,9 @@ def _scenes(quick: bool):
                                                   "dissipation", "force_error")}
             out["profiles"] = res.pressure
             out["films"] = res.film
+            out["nodes"] = res.r
+            # the answer apart from the steps taken: the run's interpolant at fixed times
+            out["force at fixed times"] = res.at(np.linspace(res.t[0], t_end, 201))
             out["steps"] = np.array([res.accepted, res.rejected])
             return out
         return f
@@ -172,11 +177,22 @@ def _run_child(tree: str, out_path: str, quick: bool) -> None:
     subprocess.run(cmd, cwd=tempfile.gettempdir(), env=env, check=True)
 
 
+def _shared_nodes(r_a, r_b):
+    """Where A's mesh nodes sit in B's (an index array), when B's mesh contains every node of
+    A's; else None."""
+    if r_a is None or r_b is None:
+        return None
+    where = np.searchsorted(r_b, r_a)
+    if where.max(initial=0) >= r_b.size or not np.array_equal(r_b[where], r_a):
+        return None
+    return where
+
+
 def compare(a: dict, b: dict, limit: float) -> tuple[list[str], bool]:
     names = sorted({k.split("::")[0] for k in a}, key=list({k.split("::")[0]: 0
                                                               for k in a}).index)
-    lines = ["| scene | steps A (acc, rej) | steps B | bitwise | largest difference / max |",
-             "|---|---|---|---|---|"]
+    lines = ["| scene | steps A (acc, rej) | steps B | bitwise | largest difference / max | "
+             "force at fixed times / max |", "|---|---|---|---|---|---|"]
     ok = True
     for name in names:
         keys = [k for k in a if k.startswith(name + "::")]
@@ -188,17 +204,25 @@ def compare(a: dict, b: dict, limit: float) -> tuple[list[str], bool]:
                          f"{'—' if y is None else ', '.join(map(str, y))} | — | "
                          f"{'B no larger' if smaller else 'B LARGER'} |")
             continue
-        same, worst, where = True, 0.0, ""
+        same, worst, where, fixed = True, 0.0, "", "—"
+        on_nodes_of_a = _shared_nodes(a.get(name + "::nodes"), b.get(name + "::nodes"))
         for k in keys:
             x, y = a[k], b.get(k)
+            if on_nodes_of_a is not None and y is not None and y.shape[-1:] != x.shape[-1:]:
+                # B's mesh holds A's nodes and more (a padded mesh): compare on A's nodes
+                y = np.take(y, on_nodes_of_a, axis=-1)
             if y is None or x.shape != y.shape:
                 same, worst, where = False, np.inf, k.split("::")[1] + " (shape)"
                 continue
             if np.array_equal(x, y, equal_nan=True):
+                if k.endswith("::force at fixed times"):
+                    fixed = "0"
                 continue
             same = False
             scale = np.nanmax(np.abs(x)) if np.any(np.isfinite(x)) else 1.0
             diff = np.nanmax(np.abs(x - y)) / (scale if scale > 0 else 1.0)
+            if k.endswith("::force at fixed times"):
+                fixed = f"{diff:.1e}"
             if not diff <= worst:
                 worst, where = diff, k.split("::")[1]
         sa = a.get(name + "::steps")
@@ -208,8 +232,11 @@ def compare(a: dict, b: dict, limit: float) -> tuple[list[str], bool]:
         same_steps = sa is None or (sb is not None and np.array_equal(sa, sb))
         ok &= same_steps and (same or worst <= limit)
         diff_cell = "0" if same else f"{worst:.2e} ({where})"
+        if on_nodes_of_a is not None and on_nodes_of_a.size != b[name + "::nodes"].size:
+            diff_cell += (f"; nodes {on_nodes_of_a.size} → {b[name + '::nodes'].size}, "
+                          "compared on A's")
         lines.append(f"| {name} | {steps_a} | {steps_b} | {'yes' if same else 'no'} | "
-                     f"{diff_cell} |")
+                     f"{diff_cell} | {fixed} |")
     return lines, ok
 
 

@@ -243,7 +243,7 @@ def relax(
         beta: β (eq 8e), in [1e-4, 1e9].
         z0: z̄0 = z0/d_c (the initial gap in units of d_c), in [1e-4, 1e3].
         t_end: final time t̄ (units of t_c). Steps grow as the solution slows: a hold to
-            t̄ = 10⁶ costs ~1800 steps at β = 100, z̄0 = 0.5 (the neck at the contact edge keeps
+            t̄ = 10⁶ costs ~1900 steps at β = 100, z̄0 = 0.5 (the neck at the contact edge keeps
             thinning).
         history: indenter travel, ``RampHold()`` (eqs 8c,d; eq 23 with ``t_accel``) or
             ``SampledTravel`` (a measured history).
