@@ -165,7 +165,8 @@ def fit_mesh(traces, starts, scales, spec, settings) -> lubjax.Mesh:
     """The mesh a fit runs on: the one :func:`lubjax.mesh_for` gives a relax run of each trace
     at its starting values (β, z̄0), refined at the contact's edge where the run ends in a
     contact whose neck needs it (near-dry traces, β ≳ 10⁵), where every trace of the batch
-    asks for the same mesh; else ``settings.mesh()`` (the batch shares one mesh).
+    asks for the same mesh; else ``settings.mesh()`` (the batch shares one mesh). Not padded
+    (``mesh_for(padded=False)``): a fit compiles one program for all its runs.
 
     Args:
         traces: the :class:`Trace` s fitted together.
@@ -188,7 +189,7 @@ def fit_mesh(traces, starts, scales, spec, settings) -> lubjax.Mesh:
         try:
             meshes.append(lubjax.mesh_for(settings, drive=drive, beta=beta,
                                           z0=start.values["z0"] / sc.indent,
-                                          t_end=float(hist.t[-1])))
+                                          t_end=float(hist.t[-1]), padded=False))
         except ValueError:  # a start outside the solver's (β, z̄0) range: the shared mesh
             return settings.mesh()
     return meshes[0] if all(m == meshes[0] for m in meshes) else settings.mesh()

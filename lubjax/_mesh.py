@@ -398,7 +398,7 @@ DRY_DERIVATIVE_REFINEMENT = 1.4
 
 
 def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None,
-             derivatives: bool = False) -> Mesh:
+             derivatives: bool = False, padded: bool = True) -> Mesh:
     """The mesh :func:`lubjax.relax` runs on for ``settings`` and one run: the tolerance's
     (``settings.mesh_parameters()``), refined for the contact the run ends in.
 
@@ -416,7 +416,8 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None,
     The refined mesh is then padded (:meth:`Mesh.padded`) to the next size of the family
     ⌈N₀·2^(k/8)⌉, N₀ the plain mesh's (``settings.mesh()``): at most 9 % more nodes, so that
     runs over a family of β, z̄0 and t̄_end share a few compiled programs instead of one per
-    size. The padding moves the force read at fixed times by ~1e-7 of its peak.
+    size (``padded=False``: not). The padding moves the force read at fixed times by ~1e-7 of
+    its peak.
 
     :func:`lubjax.make_plan`, :func:`lubjax.sweep` and the fits share one mesh across a batch
     (``settings.mesh()``), so in long holds to thin films they can differ from ``relax``.
@@ -431,6 +432,9 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None,
         indenter: ``lubjax.Paraboloid()`` (None, the default: Hertz's contact radius) or
             ``lubjax.Sphere(d_c/R)`` (Sneddon's, smaller at the same depth).
         derivatives: whether the run's derivatives are taken (:func:`lubjax.relax` knows).
+        padded: pad to a size of the family (default True); False: the refined mesh as it
+            is, for a caller that compiles one program for all its runs anyway (a fit), where
+            padding would only add nodes.
 
     Returns:
         Mesh: the mesh.
@@ -447,6 +451,8 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None,
     check_parameters(beta, z0)
     check_number("t_end", t_end, 0.0, T_END_MAX, lo_open=True)
     refined = _refined_mesh(settings, drive, float(beta), z0, float(t_end), indenter, derivatives)
+    if not padded:
+        return refined
     return refined.padded(padded_size(refined.size, settings_mesh(
         dataclasses.replace(settings, contact_radius=None)).size))
 

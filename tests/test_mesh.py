@@ -13,7 +13,6 @@ from lubjax._mesh import (
     NEAR_DRY_BETA,
     _contact_refinement,
     _interior_refinement,
-    _refined_mesh,
     _rim_refinement,
     padded_size,
 )
@@ -158,7 +157,7 @@ def test_a_differentiated_near_dry_run_gets_the_whole_mesh_finer():
     finer = lubjax.Settings(dr=dr / DRY_DERIVATIVE_REFINEMENT)
     scene = dict(drive=RAMP, z0=0.5, t_end=5.0)
     derived = lubjax.mesh_for(default, beta=1e9, derivatives=True, **scene)
-    refined = _refined_mesh(finer, RAMP, 1e9, 0.5, 5.0, None, False)
+    refined = lubjax.mesh_for(finer, beta=1e9, padded=False, **scene)
     assert derived == refined.padded(padded_size(refined.size, default.mesh().size))
     assert derived.size > lubjax.mesh_for(default, beta=1e9, **scene).size
     below = np.nextafter(NEAR_DRY_BETA, 0.0)
