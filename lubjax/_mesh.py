@@ -414,7 +414,7 @@ def mesh_for(settings, *, drive, beta, z0, t_end, indenter=None,
     times finer. docs/design.md, "The mesh rule", gives the numbers.
 
     The refined mesh is then padded (:meth:`Mesh.padded`) to the next size of the family
-    ⌈N₀·2^(k/8)⌉, N₀ the plain mesh's (``settings.mesh()``): at most 9 % more nodes, so that
+    ⌈N₀·2^(k/8)⌉, N₀ that of the settings' mesh unrefined: at most 9 % more nodes, so that
     runs over a family of β, z̄0 and t̄_end share a few compiled programs instead of one per
     size (``padded=False``: not). The padding moves the force read at fixed times by ~1e-7 of
     its peak.
