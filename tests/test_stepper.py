@@ -78,11 +78,8 @@ def test_adjoint_at_block_ends_past_the_run_and_batched():
     # Batched as an accelerator batches (a CPU maps a batch, each member alone): one vmapped
     # loop, in which the members' runs end at different steps and every sub-block runs.
     batch = jnp.array([ends["sub-block"], ends["block"], ends["budget"]])
-    asked = _sharding._ASKED.set("vmap")
-    try:
-        g_batch = np.asarray(jax.jit(jax.vmap(jax.grad(loss), (None, 0)))(x, batch))
-    finally:
-        _sharding._ASKED.reset(asked)
+    vmapped = _sharding.batch(jax.grad(loss), (False, True), "vmap")
+    g_batch = np.asarray(jax.jit(vmapped)(x, batch))
     np.testing.assert_allclose(g_batch, [np.asarray(forward(x, t)) for t in batch], rtol=1e-9)
 
 
