@@ -59,6 +59,7 @@ import csv
 import dataclasses
 import os
 import time
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -244,6 +245,38 @@ def _best(fn, *args, repeat=3):
     return _harness.timed(fn, *args, repeat=repeat)[2]
 
 
+class RunCost(NamedTuple):
+    """Warm seconds (best of 3) of relax's run of the cost scene and of its derivatives."""
+
+    nodes: int
+    accepted: int
+    primal: float
+    grad: float  # jax.grad of the sum of F̄ at 50 times
+    jacfwd: float  # jax.jacfwd of it in (β, z̄0)
+
+
+def run_cost(max_steps: int | None = None, beta=100.0, z0=0.5, t_end=5.0) -> RunCost:
+    """relax's run (default settings, no error estimate; ``max_steps`` default the settings')
+    on its own mesh: the primal, ``jax.grad`` of the sum of F̄ at 50 times and ``jax.jacfwd`` of
+    it in (β, z̄0), each warm, best of 3."""
+    settings = lubjax.Settings(error_estimate=False)
+    if max_steps is not None:
+        settings = dataclasses.replace(settings, max_steps=max_steps)
+    mesh = lubjax.mesh_for(settings, drive=lubjax.Travel(), beta=beta, z0=z0, t_end=t_end)
+    disc, tol = discretise(mesh), settings.tolerance()
+    times = jnp.linspace(0.1, t_end, 50)
+
+    def total(p):
+        traj = rollout(disc, p[0], p[1], lubjax.Travel(), t_end, tol)
+        return jnp.sum(evaluate(traj.steps, times, "force"))
+
+    p = jnp.array([beta, z0])
+    accepted = int(jax.jit(lambda p: rollout(disc, p[0], p[1], lubjax.Travel(), t_end,
+                                             tol).accepted)(p))
+    return RunCost(disc.r.shape[0], accepted, _best(jax.jit(total), p),
+                   _best(jax.jit(jax.grad(total)), p), _best(jax.jit(jax.jacfwd(total)), p))
+
+
 def cost(args, argv):
     beta, z0, t_end = 100.0, 0.5, 5.0
     lines = [
@@ -254,32 +287,19 @@ def cost(args, argv):
         "", "| max_steps | accepted | primal [s] | grad [s] | jacfwd [s] | grad / primal | "
         "jacfwd / primal |", "|---|---|---|---|---|---|---|",
     ]
-    times = jnp.linspace(0.1, t_end, 50)
     for max_steps in (500, 2000, 20_000, 80_000):
-        settings = lubjax.Settings(max_steps=max_steps, error_estimate=False)
-        mesh = lubjax.mesh_for(settings, drive=lubjax.Travel(), beta=beta, z0=z0, t_end=t_end)
-        disc, tol = discretise(mesh), settings.tolerance()
-
-        def total(p, disc=disc, tol=tol):
-            traj = rollout(disc, p[0], p[1], lubjax.Travel(), t_end, tol)
-            return jnp.sum(evaluate(traj.steps, times, "force"))
-
-        p = jnp.array([beta, z0])
-        accepted = int(jax.jit(lambda p, disc=disc, tol=tol: rollout(
-            disc, p[0], p[1], lubjax.Travel(), t_end, tol).accepted)(p))
-        primal = _best(jax.jit(total), p)
-        grad = _best(jax.jit(jax.grad(total)), p)
-        forward = _best(jax.jit(jax.jacfwd(total)), p)
-        lines.append(f"| {max_steps} | {accepted} | {primal:.3f} | {grad:.3f} | {forward:.3f} | "
-                     f"{grad / primal:.1f} | {forward / primal:.1f} |")
+        run = run_cost(max_steps, beta, z0, t_end)
+        lines.append(f"| {max_steps} | {run.accepted} | {run.primal:.3f} | {run.grad:.3f} | "
+                     f"{run.jacfwd:.3f} | {run.grad / run.primal:.1f} | "
+                     f"{run.jacfwd / run.primal:.1f} |")
         print(lines[-1], flush=True)
     # What a step is made of: one dense LU of the run's system per attempt; a derivative adds
     # the replayed step's and the fully implicit Jacobian's.
-    size = disc.r.shape[0]
+    size = run.nodes
     matrix = jnp.eye(size) * size + jax.random.normal(jax.random.PRNGKey(0), (size, size))
     lu = _best(jax.jit(lambda a: jax.lax.linalg.lu(a)[0]), matrix, repeat=20)
     lines += ["", f"One LU factorisation of the run's {size}×{size} system: {1e3 * lu:.3f} ms; "
-              f"the primal's time per accepted step: {1e3 * primal / accepted:.3f} ms."]
+              f"the primal's time per accepted step: {1e3 * run.primal / run.accepted:.3f} ms."]
     print(lines[-1], flush=True)
     lines += near_dry_cost()
     _harness.write_report(os.path.join(os.path.dirname(args.out), "derivative_cost.md"), lines)
