@@ -32,6 +32,7 @@ import numpy as np
 import pytest
 
 import lubjax
+from lubjax._mesh import NEAR_DRY_BETA
 
 Z0 = 0.5
 T_END = 2.0
@@ -140,6 +141,27 @@ def test_excess_over_hertz_falls_with_beta_as_the_film_drains():
             assert slope_excess < -0.5, where
             if hold[k] and mode == "relative":
                 assert abs(slope_excess - slope_shift) < 0.02, where
+
+
+@pytest.mark.slow
+def test_the_two_regimes_meet_within_their_accuracy_where_auto_switches():
+    """film_error="auto" switches the film's norm and relax's mesh rule at β = NEAR_DRY_BETA,
+    so the force jumps there: not smoothly (a mesh's node count cannot change smoothly), but
+    within the two runs' own accuracy. Just below and at the switch (z̄0 = 0.5, t̄ ≤ 2, the
+    default settings with their error estimate), F̄ at 80 times differs by less than the sum of
+    the two runs' estimated errors at each time (seen: at most 0.19 of it, 6.8e-5 of the peak),
+    and the two runs are different runs (their step counts differ)."""
+    below = np.nextafter(NEAR_DRY_BETA, 0.0)
+    times = np.linspace(0.05, T_END, 80)
+    relative, force = (lubjax.relax(beta, Z0, T_END)
+                       for beta in (below, NEAR_DRY_BETA))
+    assert relative.ok and force.ok
+    assert relative.accepted != force.accepted
+    jump = np.abs(relative.at(times) - force.at(times))
+    estimated = (np.abs(np.interp(times, relative.t, relative.force_error))
+                 + np.abs(np.interp(times, force.t, force.force_error)))
+    assert np.all(np.isfinite(estimated))
+    np.testing.assert_array_less(jump, estimated)
 
 
 @pytest.fixture(scope="module")
